@@ -1,0 +1,32 @@
+# mspace_add_plugin(NAME <name> SOURCES <files...> [LINK <targets...>])
+#
+# Builds the plugin library `libmspace-plugin-<name>.so` with the flags the
+# kernel expects: a MODULE library, hidden visibility (only the two symbols of
+# MSPACE_EXPORT_PLUGIN are exported), C++20 and the SDK's Eigen settings. The
+# target is called `mspace_plugin_<name>`.
+function(mspace_add_plugin)
+  cmake_parse_arguments(ARG "" "NAME" "SOURCES;LINK" ${ARGN})
+  if(NOT ARG_NAME OR NOT ARG_SOURCES)
+    message(FATAL_ERROR "mspace_add_plugin: NAME and SOURCES are required")
+  endif()
+  set(target mspace_plugin_${ARG_NAME})
+  add_library(${target} MODULE ${ARG_SOURCES})
+  target_link_libraries(${target} PRIVATE mspace::sdk ${ARG_LINK})
+  if(TARGET mspace_warnings)
+    target_link_libraries(${target} PRIVATE mspace_warnings)
+  endif()
+  set_target_properties(${target} PROPERTIES
+    PREFIX "lib"
+    OUTPUT_NAME "mspace-plugin-${ARG_NAME}"
+    CXX_VISIBILITY_PRESET hidden
+    VISIBILITY_INLINES_HIDDEN ON
+    CXX_STANDARD 20
+    CXX_STANDARD_REQUIRED ON)
+  if(DEFINED MSPACE_PLUGIN_OUTPUT_DIR)
+    set_target_properties(${target} PROPERTIES LIBRARY_OUTPUT_DIRECTORY ${MSPACE_PLUGIN_OUTPUT_DIR})
+  endif()
+  if(DEFINED MSPACE_PLUGIN_INSTALL_DIR)
+    set_target_properties(${target} PROPERTIES INSTALL_RPATH "$ORIGIN/../..")
+    install(TARGETS ${target} LIBRARY DESTINATION ${MSPACE_PLUGIN_INSTALL_DIR})
+  endif()
+endfunction()

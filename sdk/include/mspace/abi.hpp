@@ -1,0 +1,44 @@
+// mspace/abi.hpp — the SDK ABI tag.
+//
+// Every plugin library embeds the tag of the SDK headers it was compiled against
+// (see plugin_export.hpp). The kernel compares it with its own before calling
+// anything in the library and refuses a mismatch, because the interfaces in
+// these headers pass C++ classes, std::string/std::vector and Eigen matrices by
+// reference: a plugin built with another SDK version, another standard library
+// ABI or another Eigen alignment would corrupt memory instead of failing.
+#pragma once
+
+#include <Eigen/Core>
+
+#define MSPACE_SDK_VERSION_MAJOR 1
+#define MSPACE_SDK_VERSION_MINOR 0
+
+#define MSPACE_ABI_STR2(x) #x
+#define MSPACE_ABI_STR(x) MSPACE_ABI_STR2(x)
+
+#if defined(__clang__)
+#define MSPACE_ABI_COMPILER "clang" MSPACE_ABI_STR(__clang_major__)
+#elif defined(__GNUC__)
+#define MSPACE_ABI_COMPILER "gcc" MSPACE_ABI_STR(__GNUC__)
+#else
+#define MSPACE_ABI_COMPILER "cc"
+#endif
+
+#if defined(_GLIBCXX_USE_CXX11_ABI) && _GLIBCXX_USE_CXX11_ABI
+#define MSPACE_ABI_STDLIB "cxx11"
+#else
+#define MSPACE_ABI_STDLIB "cxx98"
+#endif
+
+/// The tag: SDK major version, compiler family/major, libstdc++ string ABI,
+/// Eigen version and Eigen's maximum static alignment (which changes the layout
+/// of fixed-size Eigen members such as Pose6).
+#define MSPACE_ABI_TAG                                                          \
+  "mspace-sdk" MSPACE_ABI_STR(MSPACE_SDK_VERSION_MAJOR) "/" MSPACE_ABI_COMPILER \
+  "/" MSPACE_ABI_STDLIB "/eigen" MSPACE_ABI_STR(EIGEN_WORLD_VERSION) "."       \
+  MSPACE_ABI_STR(EIGEN_MAJOR_VERSION) "/align" MSPACE_ABI_STR(EIGEN_MAX_STATIC_ALIGN_BYTES)
+
+namespace mspace {
+/// The ABI tag the calling code was compiled with.
+inline const char* sdk_abi_tag() { return MSPACE_ABI_TAG; }
+}  // namespace mspace

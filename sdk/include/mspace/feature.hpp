@@ -1,0 +1,105 @@
+// mspace/feature.hpp — the feature-type plugin interface (T-RO §IV–V).
+//
+// A FeatureType plugin (one per YAML instance, e.g. `point`) creates Feature
+// objects. A Feature owns its full coordinates x_f and its dense information;
+// the estimator only ever sees its M-space perturbations δx_p. What is per
+// feature type lives here: the parameterisation (layout), B and B̃ for the
+// current M-space dimension (eqs. 10–12), the innovation η with J_ηo and J_ηv
+// (eq. 16), dense-information handling and M-space extension. Everything else
+// — the transform to the sensor frame, J_η,state = J_ηo (J_or  J_of B̃)
+// (eq. 30), the estimator — is generic and lives in the SDK and kernel.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "mspace/coords.hpp"
+#include "mspace/measurement.hpp"
+#include "mspace/plugin.hpp"
+
+namespace mspace {
+
+/// η(x_o, v) and its Jacobians at the current linearisation point.
+struct Innovation {
+  Eigen::VectorXd eta;      ///< expected value 0; the EKF applies δx = −K η (eq. 31)
+  Eigen::MatrixXd J_eta_o;  ///< ∂η/∂x_o (m × n, n = layout size)
+  Eigen::MatrixXd J_eta_v;  ///< ∂η/∂v   (m × dim v)
+};
+
+/// New M-space dimensions produced by Feature::extend (phase 4).
+///
+/// The new perturbations are modelled as
+///   δx_p,new = J_sensor · δx_ms + J_own · δx_p,old + w,   w ~ N(0, C_new),
+/// where x_ms is the pose of sensor `sensor` at the current step and δx_p,old
+/// are the feature's M-space dimensions before the extension. The estimator
+/// adds the rows with the covariances and cross-covariances this implies.
+struct Extension {
+  int new_dims = 0;
+  int sensor = 0;
+  Eigen::MatrixXd J_sensor;  ///< new_dims × 6 (may be zero-size: no correlation with the robot)
+  Eigen::MatrixXd J_own;     ///< new_dims × old dim (may be zero-size)
+  Eigen::MatrixXd C_new;     ///< new_dims × new_dims, symmetric positive definite
+};
+
+class Feature {
+ public:
+  virtual ~Feature() = default;
+
+  /// The coordinate layout (same for every feature of a type).
+  virtual const CoordLayout& layout() const = 0;
+
+  /// x_f in the map frame.
+  const Eigen::VectorXd& coords() const { return x_; }
+  /// Current M-space dimension (0 = tentative, not in the estimator).
+  int mspace_dim() const { return mdim_; }
+
+  /// B(x_f): mdim × n (eq. 10). B̃(x_f): n × mdim (eq. 11). B·B̃ = I (eq. 12).
+  virtual Eigen::MatrixXd B() const = 0;
+  virtual Eigen::MatrixXd B_dual() const = 0;
+
+  /// Innovation for measurement `m` given the feature's coordinates in the
+  /// sensor frame x_o (eq. 16). Returns false when the measurement cannot
+  /// belong to this feature (wrong kind, behind the sensor, …).
+  virtual bool innovation(const Eigen::VectorXd& x_o, const Measurement& m,
+                          Innovation& out) const = 0;
+
+  /// Covariance of x_f along the directions the M-space does not cover,
+  /// used only to gate tentative features (n × n; zero-size means none).
+  virtual Eigen::MatrixXd gating_covariance() const { return {}; }
+
+  /// eq. 24: x_f += B̃ δx_p. Features that keep constraints or derived data
+  /// override and call the base.
+  virtual void apply_perturbation(const Eigen::VectorXd& dx_p) { x_ += B_dual() * dx_p; }
+
+  /// Phase 3: store the evidence of a matched (or creating) measurement and
+  /// slide coordinates orthogonal to the M-space.
+  virtual void add_dense_information(const Measurement& m, const SensorView& view) = 0;
+
+  /// Phase 4: add M-space dimensions if the dense information supports it.
+  /// The feature updates x_f and its dimension itself and returns what the
+  /// estimator must add; std::nullopt when nothing changes.
+  virtual std::optional<Extension> extend(const SensorView& last_view) = 0;
+
+ protected:
+  Eigen::VectorXd x_;
+  int mdim_ = 0;
+};
+
+/// The plugin object of a feature type.
+class FeatureType : public PluginObject {
+ public:
+  virtual const CoordLayout& layout() const = 0;
+  /// Largest M-space dimension a feature of this type can reach.
+  virtual int max_mspace_dim() const = 0;
+  /// Measurement kinds this type accepts (for wiring checks).
+  virtual std::vector<std::string> measurement_kinds() const = 0;
+  /// A new tentative feature (M-space dimension 0) from an unmatched
+  /// measurement; nullptr when the measurement cannot start a feature.
+  /// The kernel calls add_dense_information(m, view) on it right after.
+  virtual std::unique_ptr<Feature> create(const Measurement& m, const SensorView& view) = 0;
+};
+
+}  // namespace mspace

@@ -1,0 +1,39 @@
+// mspace/source.hpp — data sources: logs, data sets, simulators.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "mspace/extractor.hpp"
+#include "mspace/plugin.hpp"
+#include "mspace/pose.hpp"
+
+namespace mspace {
+
+/// Everything that happened between the previous step and time t.
+struct DataStep {
+  double t = 0.0;
+  /// Dead-reckoning increment x_d(t, t−1) for the motion model (empty: none).
+  Eigen::VectorXd odometry;
+  std::vector<SensorReading> readings;
+  /// True robot pose at t, when the source knows it (evaluation only).
+  std::optional<Pose6> ground_truth;
+};
+
+class DataSource : public PluginObject {
+ public:
+  /// Fills the next step; false at the end of the data. Malformed input
+  /// throws std::runtime_error naming file and line.
+  virtual bool next(DataStep& step) = 0;
+  /// Number of steps if known in advance (for progress), else 0.
+  virtual std::size_t size_hint() const { return 0; }
+  /// Initial robot pose in the map frame.
+  virtual Pose6 initial_pose() const { return Pose6::Zero(); }
+  /// Ground-truth landmark positions if known (3 × N), for pictures only.
+  virtual Eigen::MatrixXd true_landmarks() const { return {}; }
+};
+
+}  // namespace mspace
