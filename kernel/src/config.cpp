@@ -1,1 +1,633 @@
-// placeholder
+#include "config.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <numbers>
+#include <set>
+#include <sstream>
+
+#include <yaml-cpp/yaml.h>
+
+#include "logging.hpp"
+
+namespace mspace::kernel {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+/// Pose entries 3..5 (θ, φ, ψ) are angles: degrees in YAML, radians inside.
+constexpr int kFirstAngle = kTheta;
+
+const std::vector<std::string> kTopKeys = {"run",     "source",      "motion",       "estimator", "features",
+                                           "sensors", "association", "initial_pose", "output"};
+const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "plugin_path", "seed"};
+const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds"};
+const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age"};
+const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
+const std::vector<std::string> kOutputKeys = {"dir", "trajectory", "map", "summary", "picture", "picture_size"};
+
+std::string join(const std::vector<std::string>& items) {
+  std::string out;
+  for (const std::string& item : items) out += (out.empty() ? "" : ", ") + item;
+  return out;
+}
+
+bool contains(const std::vector<std::string>& items, const std::string& item) {
+  return std::find(items.begin(), items.end(), item) != items.end();
+}
+
+/// Shortest text that reads back as the same double (".inf" etc. in YAML spelling).
+std::string format_number(double v) {
+  if (std::isnan(v)) return ".nan";
+  if (std::isinf(v)) return v > 0 ? ".inf" : "-.inf";
+  char buf[64];
+  const auto result = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, result.ptr);
+}
+
+/// Angles converted from radians back to degrees carry rounding noise in the
+/// last bits (90° → 90.00000000000001); 12 significant digits hide it.
+std::string format_degrees(double radians) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.12g", radians * kRadToDeg);
+  return buf;
+}
+
+std::string format_range(double min, double max) {
+  auto bound = [](double v) { return std::isinf(v) ? std::string(v > 0 ? "inf" : "-inf") : format_number(v); };
+  std::string out = "[";  // built by appending: "[" + std::string&& trips GCC 12's -Wrestrict
+  out += bound(min);
+  out += ", ";
+  out += bound(max);
+  out += ']';
+  return out;
+}
+
+/// How a node looks, for "expected X, got Y" messages.
+std::string describe(const YAML::Node& node) {
+  switch (node.Type()) {
+    case YAML::NodeType::Scalar: return "'" + node.Scalar() + "'";
+    case YAML::NodeType::Sequence: return "a list";
+    case YAML::NodeType::Map: return "a map";
+    default: return "nothing";
+  }
+}
+
+/// yaml-cpp's conversion of a scalar, or nothing if it does not convert.
+template <class T>
+std::optional<T> convert(const YAML::Node& node) {
+  if (!node.IsScalar()) return std::nullopt;
+  try {
+    return node.as<T>();
+  } catch (const YAML::BadConversion&) {
+    return std::nullopt;
+  }
+}
+
+bool is_valid_name(const std::string& name) {
+  return !name.empty() && std::all_of(name.begin(), name.end(),
+                                      [](unsigned char c) { return std::isalnum(c) != 0 || c == '_' || c == '-'; });
+}
+
+/// One YAML value being read: the node, its dotted key for messages and
+/// where it is. `note` is appended to problems (it names the plugin).
+struct Item {
+  YAML::Node node;
+  std::string key;
+  std::string name;  ///< last component of the key
+  YAML::Mark mark;   ///< of the value, or of its key when the value is empty
+  YAML::Mark key_mark;
+  std::string note;
+};
+
+/// Reads one document into a RunConfig. Each method reads one kind of value
+/// or one section and reports problems through fail().
+class Reader {
+ public:
+  Reader(std::string file, PluginRegistry& registry) : file_(std::move(file)), registry_(registry) {}
+
+  RunConfig read_document(const YAML::Node& root);
+
+ private:
+  [[noreturn]] void fail(const YAML::Mark& mark, const std::string& key, const std::string& problem) const;
+  [[noreturn]] void fail(const Item& item, const std::string& problem) const {
+    fail(item.mark, item.key, problem + item.note);
+  }
+  std::string where(const YAML::Mark& mark) const { return file_ + ":" + std::to_string(std::max(mark.line, 0) + 1); }
+
+  // Maps and lists.
+  std::vector<Item> entries(const Item& map, const std::vector<std::string>* allowed) const;
+  std::vector<Item> elements(const Item& list) const;
+  static const Item* find(const std::vector<Item>& fields, const std::string& name);
+  const Item& need(const Item& map, const std::vector<Item>& fields, const std::string& name) const;
+
+  // Scalars and lists of scalars.
+  std::string text(const Item& item) const;
+  double number(const Item& item, double min = -kInf, double max = kInf) const;
+  std::int64_t integer(const Item& item, double min = -kInf, double max = kInf) const;
+  bool boolean(const Item& item) const;
+  double probability(const Item& item) const;
+  std::vector<double> numbers(const Item& item, int size, double min = -kInf, double max = kInf) const;
+  std::vector<std::string> texts(const Item& item) const;
+  Pose6 pose(const Item& item, double min = -kInf) const;
+  std::string name(const Item& key_item) const;
+
+  // Plugin instances.
+  InstanceConfig instance(const Item& item, const std::string& instance_name, PluginKind kind) const;
+  const PluginDescriptor& descriptor(const Item& plugin_item, const std::string& plugin, PluginKind kind) const;
+  Params params(const Item& item, const std::vector<Item>& fields, const PluginDescriptor& d) const;
+  ParamValue param_value(const Item& item, const ParamSpec& spec) const;
+
+  // Sections.
+  void read_run(const Item* item, RunConfig& config) const;
+  std::vector<InstanceConfig> read_features(const Item& item) const;
+  SensorConfig read_sensor(const Item& item, const std::vector<std::string>& feature_names) const;
+  std::vector<std::string> read_feeds(const Item& item, const std::vector<std::string>& feature_names) const;
+  AssociationConfig read_association(const Item* item) const;
+  void read_initial_pose(const Item* item, RunConfig& config) const;
+  OutputConfig read_output(const Item* item, const std::string& run_name) const;
+
+  std::string file_;
+  PluginRegistry& registry_;
+};
+
+void Reader::fail(const YAML::Mark& mark, const std::string& key, const std::string& problem) const {
+  std::ostringstream os;
+  os << file_ << ':' << std::max(mark.line, 0) + 1 << ':' << std::max(mark.column, 0) + 1 << ": ";
+  if (!key.empty()) os << key << ": ";
+  os << problem;
+  throw ConfigError(os.str());
+}
+
+std::vector<Item> Reader::entries(const Item& map, const std::vector<std::string>* allowed) const {
+  if (!map.node.IsMap()) fail(map, "expected a map of 'key: value' entries, got " + describe(map.node));
+  std::vector<Item> fields;
+  std::set<std::string> seen;
+  for (const auto& entry : map.node) {
+    const YAML::Mark key_mark = entry.first.Mark();
+    const std::string key_name = entry.first.IsScalar() ? entry.first.Scalar() : std::string();
+    const std::string key = map.key.empty() ? key_name : map.key + "." + key_name;
+    if (key_name.empty()) fail(key_mark, map.key, "keys must be plain names");
+    if (!seen.insert(key_name).second) fail(key_mark, key, "duplicate key");
+    if (allowed != nullptr && !contains(*allowed, key_name))
+      fail(key_mark, key, "unknown key (allowed: " + join(*allowed) + ")");
+    const YAML::Mark value_mark = entry.second.IsNull() ? key_mark : entry.second.Mark();
+    fields.push_back(Item{entry.second, key, key_name, value_mark, key_mark, map.note});
+  }
+  return fields;
+}
+
+std::vector<Item> Reader::elements(const Item& list) const {
+  if (!list.node.IsSequence()) fail(list, "expected a list [a, b, ...], got " + describe(list.node));
+  std::vector<Item> items;
+  for (std::size_t i = 0; i < list.node.size(); ++i) {
+    const YAML::Node element = list.node[i];
+    const YAML::Mark mark = element.IsNull() ? list.mark : element.Mark();
+    items.push_back(Item{element, list.key + "[" + std::to_string(i) + "]", list.name, mark, mark, list.note});
+  }
+  return items;
+}
+
+const Item* Reader::find(const std::vector<Item>& fields, const std::string& name) {
+  for (const Item& field : fields)
+    if (field.name == name) return &field;
+  return nullptr;
+}
+
+const Item& Reader::need(const Item& map, const std::vector<Item>& fields, const std::string& name) const {
+  if (const Item* field = find(fields, name)) return *field;
+  fail(map.key_mark, map.key.empty() ? name : map.key + "." + name, "missing required key");
+}
+
+std::string Reader::text(const Item& item) const {
+  if (!item.node.IsScalar()) fail(item, "expected a string, got " + describe(item.node));
+  try {
+    return expand_env_vars(item.node.Scalar());
+  } catch (const std::invalid_argument& e) {
+    fail(item, e.what());
+  }
+}
+
+double Reader::number(const Item& item, double min, double max) const {
+  const std::optional<double> v = convert<double>(item.node);
+  if (!v) fail(item, "expected a number, got " + describe(item.node));
+  if (!(*v >= min && *v <= max)) fail(item, format_number(*v) + " is out of range " + format_range(min, max));
+  return *v;
+}
+
+std::int64_t Reader::integer(const Item& item, double min, double max) const {
+  const std::optional<std::int64_t> v = convert<std::int64_t>(item.node);
+  if (!v) fail(item, "expected an integer, got " + describe(item.node));
+  const auto as_double = static_cast<double>(*v);
+  if (!(as_double >= min && as_double <= max))
+    fail(item, std::to_string(*v) + " is out of range " + format_range(min, max));
+  return *v;
+}
+
+bool Reader::boolean(const Item& item) const {
+  const std::optional<bool> v = convert<bool>(item.node);
+  if (!v) fail(item, "expected true or false, got " + describe(item.node));
+  return *v;
+}
+
+double Reader::probability(const Item& item) const {
+  const double p = number(item);
+  if (!(p > 0.0 && p < 1.0)) fail(item, format_number(p) + " is out of range (0, 1)");
+  return p;
+}
+
+std::vector<double> Reader::numbers(const Item& item, int size, double min, double max) const {
+  const std::vector<Item> items = elements(item);
+  if (size >= 0 && items.size() != static_cast<std::size_t>(size))
+    fail(item, "expected a list of " + std::to_string(size) + " numbers, got " + std::to_string(items.size()));
+  std::vector<double> values;
+  for (const Item& element : items) values.push_back(number(element, min, max));
+  return values;
+}
+
+std::vector<std::string> Reader::texts(const Item& item) const {
+  std::vector<std::string> values;
+  for (const Item& element : elements(item)) values.push_back(text(element));
+  return values;
+}
+
+Pose6 Reader::pose(const Item& item, double min) const {
+  const std::vector<double> v = numbers(item, 6, min);
+  Pose6 p;
+  for (int i = 0; i < 6; ++i) p[i] = i >= kFirstAngle ? v[i] * kDegToRad : v[i];
+  return p;
+}
+
+std::string Reader::name(const Item& key_item) const {
+  if (!is_valid_name(key_item.name))
+    fail(key_item.key_mark, key_item.key, "names may only use letters, digits, '_' and '-'");
+  return key_item.name;
+}
+
+const PluginDescriptor& Reader::descriptor(const Item& plugin_item, const std::string& plugin, PluginKind kind) const {
+  std::shared_ptr<const LoadedPlugin> loaded;
+  try {
+    loaded = registry_.load(plugin);
+  } catch (const PluginError& e) {
+    fail(plugin_item, e.what());
+  }
+  // The registry keeps the library loaded, so the descriptor stays valid.
+  if (loaded->descriptor->kind != kind)
+    fail(plugin_item, kind_mismatch_message(plugin, loaded->descriptor->kind, kind));
+  return *loaded->descriptor;
+}
+
+InstanceConfig Reader::instance(const Item& item, const std::string& instance_name, PluginKind kind) const {
+  const std::vector<Item> fields = entries(item, nullptr);  // parameters are checked in params()
+  const Item& plugin_item = need(item, fields, "plugin");
+  InstanceConfig config;
+  config.instance = instance_name;
+  config.plugin = text(plugin_item);
+  config.where = where(item.key_mark);
+  config.params = params(item, fields, descriptor(plugin_item, config.plugin, kind));
+  return config;
+}
+
+Params Reader::params(const Item& item, const std::vector<Item>& fields, const PluginDescriptor& d) const {
+  const std::string note = " (plugin '" + d.name + "')";
+  auto spec_of = [&d](const std::string& name) -> const ParamSpec* {
+    for (const ParamSpec& spec : d.params)
+      if (spec.name == name) return &spec;
+    return nullptr;
+  };
+  Params values = Params::defaults(d.params);
+  for (Item field : fields) {
+    if (field.name == "plugin") continue;
+    const ParamSpec* spec = spec_of(field.name);
+    if (spec == nullptr) {
+      std::vector<std::string> names;
+      for (const ParamSpec& s : d.params) names.push_back(s.name);
+      fail(field.key_mark, field.key,
+           "unknown parameter of plugin '" + d.name + "' (" +
+               (names.empty() ? std::string("it has no parameters") : "its parameters: " + join(names)) + ")");
+    }
+    field.note = note;
+    values.set(spec->name, param_value(field, *spec));
+  }
+  for (const ParamSpec& spec : d.params) {
+    if (spec.required && !values.has(spec.name))
+      fail(item.key_mark, item.key + "." + spec.name,
+           "missing required parameter of plugin '" + d.name + "'" +
+               (spec.description.empty() ? std::string() : " (" + spec.description + ")"));
+  }
+  return values;
+}
+
+ParamValue Reader::param_value(const Item& item, const ParamSpec& spec) const {
+  switch (spec.type) {
+    case ParamType::Bool: return boolean(item);
+    case ParamType::Int: return integer(item, spec.min, spec.max);
+    case ParamType::Double: return number(item, spec.min, spec.max);
+    case ParamType::DoubleList: return numbers(item, spec.list_size, spec.min, spec.max);
+    case ParamType::String: {
+      std::string value = text(item);
+      if (!spec.choices.empty() && !contains(spec.choices, value))
+        fail(item, "'" + value + "' is not one of: " + join(spec.choices));
+      return value;
+    }
+  }
+  fail(item, "parameter has an unknown type");
+}
+
+void Reader::read_run(const Item* item, RunConfig& config) const {
+  const std::string stem = std::filesystem::path(file_).stem().string();
+  config.name = stem.empty() ? "run" : stem;
+  if (item == nullptr) return;
+  const std::vector<Item> fields = entries(*item, &kRunKeys);
+  if (const Item* f = find(fields, "name")) {
+    config.name = text(*f);
+    if (config.name.empty() || config.name.find_first_of("/ \t") != std::string::npos)
+      fail(*f, "a run name must be non-empty, without '/' or spaces");
+  }
+  if (const Item* f = find(fields, "log_level")) {
+    config.log_level = text(*f);
+    try {
+      parse_log_level(config.log_level);
+    } catch (const std::invalid_argument& e) {
+      fail(*f, e.what());
+    }
+  }
+  if (const Item* f = find(fields, "max_steps")) config.max_steps = integer(*f, 0);
+  if (const Item* f = find(fields, "plugin_path")) config.plugin_path = texts(*f);
+  if (const Item* f = find(fields, "seed")) config.seed = integer(*f);
+}
+
+std::vector<InstanceConfig> Reader::read_features(const Item& item) const {
+  std::vector<InstanceConfig> features;
+  for (const Item& field : entries(item, nullptr))
+    features.push_back(instance(field, name(field), PluginKind::Feature));
+  if (features.empty()) fail(item, "at least one feature instance is needed");
+  return features;
+}
+
+std::vector<std::string> Reader::read_feeds(const Item& item, const std::vector<std::string>& feature_names) const {
+  std::vector<std::string> feeds;
+  for (const Item& element : elements(item)) {
+    std::string feed = text(element);
+    if (!contains(feature_names, feed))
+      fail(element, "unknown feature instance '" + feed + "' (instances under features: " + join(feature_names) + ")");
+    if (contains(feeds, feed)) fail(element, "'" + feed + "' is listed twice");
+    feeds.push_back(std::move(feed));
+  }
+  if (feeds.empty()) fail(item, "a sensor must feed at least one feature instance");
+  return feeds;
+}
+
+SensorConfig Reader::read_sensor(const Item& item, const std::vector<std::string>& feature_names) const {
+  const std::vector<Item> fields = entries(item, &kSensorKeys);
+  SensorConfig sensor;
+  sensor.name = name(item);
+  sensor.channel = sensor.name;
+  if (const Item* f = find(fields, "channel")) {
+    sensor.channel = text(*f);
+    if (sensor.channel.empty()) fail(*f, "the channel name is empty");
+  }
+  sensor.mount = pose(need(item, fields, "mount"));
+  sensor.extractor = instance(need(item, fields, "extractor"), sensor.name, PluginKind::Extractor);
+  sensor.feeds = read_feeds(need(item, fields, "feeds"), feature_names);
+  return sensor;
+}
+
+AssociationConfig Reader::read_association(const Item* item) const {
+  AssociationConfig association;
+  if (item == nullptr) return association;
+  const std::vector<Item> fields = entries(*item, &kAssociationKeys);
+  if (const Item* f = find(fields, "gate_probability")) association.gate_probability = probability(*f);
+  if (const Item* f = find(fields, "new_feature_probability")) association.new_feature_probability = probability(*f);
+  if (const Item* f = find(fields, "tentative_max_age"))
+    association.tentative_max_age = static_cast<int>(integer(*f, 1, std::numeric_limits<int>::max()));
+  return association;
+}
+
+void Reader::read_initial_pose(const Item* item, RunConfig& config) const {
+  if (item == nullptr) return;
+  const std::vector<Item> fields = entries(*item, &kInitialPoseKeys);
+  if (const Item* f = find(fields, "pose")) config.initial_pose = pose(*f);
+  if (const Item* f = find(fields, "sigma")) config.initial_sigma = pose(*f, 0.0);
+}
+
+OutputConfig Reader::read_output(const Item* item, const std::string& run_name) const {
+  OutputConfig output;
+  output.dir = "out/" + run_name;
+  if (item == nullptr) return output;
+  const std::vector<Item> fields = entries(*item, &kOutputKeys);
+  if (const Item* f = find(fields, "dir")) output.dir = text(*f);
+  if (const Item* f = find(fields, "trajectory")) output.trajectory = boolean(*f);
+  if (const Item* f = find(fields, "map")) output.map = boolean(*f);
+  if (const Item* f = find(fields, "summary")) output.summary = boolean(*f);
+  if (const Item* f = find(fields, "picture")) output.picture = boolean(*f);
+  if (const Item* f = find(fields, "picture_size")) output.picture_size = static_cast<int>(integer(*f, 64, 20000));
+  return output;
+}
+
+RunConfig Reader::read_document(const YAML::Node& root) {
+  const YAML::Mark start = root.Mark();
+  if (!root.IsMap())
+    fail(start, "",
+         root.IsNull() ? "the configuration is empty"
+                       : "the configuration must be a map of sections (" + join(kTopKeys) + ")");
+  const Item top{root, "", "", start, start, ""};
+  const std::vector<Item> sections = entries(top, &kTopKeys);
+  RunConfig config;
+  config.file = file_;
+  read_run(find(sections, "run"), config);
+  // The sections below look plugins up, so the run's plugin directories must be known first.
+  for (const std::string& dir : config.plugin_path) registry_.add_search_dir(dir);
+  config.source = instance(need(top, sections, "source"), "source", PluginKind::Source);
+  config.motion = instance(need(top, sections, "motion"), "motion", PluginKind::MotionModel);
+  config.estimator = instance(need(top, sections, "estimator"), "estimator", PluginKind::Estimator);
+  config.features = read_features(need(top, sections, "features"));
+  std::vector<std::string> feature_names;
+  for (const InstanceConfig& feature : config.features) feature_names.push_back(feature.instance);
+  const Item& sensors = need(top, sections, "sensors");
+  for (const Item& field : entries(sensors, nullptr)) config.sensors.push_back(read_sensor(field, feature_names));
+  if (config.sensors.empty()) fail(sensors, "at least one sensor is needed");
+  config.association = read_association(find(sections, "association"));
+  read_initial_pose(find(sections, "initial_pose"), config);
+  config.output = read_output(find(sections, "output"), config.name);
+  return config;
+}
+
+// ---- Writing the effective configuration -------------------------------
+
+void emit_param(YAML::Emitter& out, const ParamValue& value) {
+  std::visit(
+      [&out](const auto& v) {
+        using T = std::decay_t<decltype(v)>;
+        if constexpr (std::is_same_v<T, bool>) {
+          out << (v ? "true" : "false");
+        } else if constexpr (std::is_same_v<T, std::int64_t>) {
+          out << std::to_string(v);
+        } else if constexpr (std::is_same_v<T, double>) {
+          out << format_number(v);
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          out << v;
+        } else {
+          out << YAML::Flow << YAML::BeginSeq;
+          for (double x : v) out << format_number(x);
+          out << YAML::EndSeq;
+        }
+      },
+      value);
+}
+
+void emit_instance_body(YAML::Emitter& out, const InstanceConfig& instance) {
+  out << YAML::BeginMap << YAML::Key << "plugin" << YAML::Value << instance.plugin;
+  for (const auto& [name, value] : instance.params.values()) {
+    out << YAML::Key << name << YAML::Value;
+    emit_param(out, value);
+  }
+  out << YAML::EndMap;
+}
+
+void emit_pose(YAML::Emitter& out, const Pose6& pose) {
+  out << YAML::Flow << YAML::BeginSeq;
+  for (int i = 0; i < 6; ++i) out << (i >= kFirstAngle ? format_degrees(pose[i]) : format_number(pose[i]));
+  out << YAML::EndSeq;
+}
+
+void emit_string_list(YAML::Emitter& out, const std::vector<std::string>& items) {
+  out << YAML::Flow << YAML::BeginSeq;
+  for (const std::string& item : items) out << item;
+  out << YAML::EndSeq;
+}
+
+const char* yes_no(bool v) { return v ? "true" : "false"; }
+
+void emit_run(YAML::Emitter& out, const RunConfig& c) {
+  out << YAML::Key << "run" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "name" << YAML::Value << c.name;
+  out << YAML::Key << "log_level" << YAML::Value << c.log_level;
+  out << YAML::Key << "max_steps" << YAML::Value << std::to_string(c.max_steps);
+  out << YAML::Key << "plugin_path" << YAML::Value;
+  emit_string_list(out, c.plugin_path);
+  if (c.seed) out << YAML::Key << "seed" << YAML::Value << std::to_string(*c.seed);
+  out << YAML::EndMap;
+}
+
+void emit_sensors(YAML::Emitter& out, const std::vector<SensorConfig>& sensors) {
+  out << YAML::Key << "sensors" << YAML::Value << YAML::BeginMap;
+  for (const SensorConfig& s : sensors) {
+    out << YAML::Key << s.name << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "channel" << YAML::Value << s.channel;
+    out << YAML::Key << "mount" << YAML::Value;
+    emit_pose(out, s.mount);
+    out << YAML::Key << "extractor" << YAML::Value;
+    emit_instance_body(out, s.extractor);
+    out << YAML::Key << "feeds" << YAML::Value;
+    emit_string_list(out, s.feeds);
+    out << YAML::EndMap;
+  }
+  out << YAML::EndMap;
+}
+
+void emit_tail(YAML::Emitter& out, const RunConfig& c) {
+  out << YAML::Key << "association" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "gate_probability" << YAML::Value << format_number(c.association.gate_probability);
+  out << YAML::Key << "new_feature_probability" << YAML::Value << format_number(c.association.new_feature_probability);
+  out << YAML::Key << "tentative_max_age" << YAML::Value << std::to_string(c.association.tentative_max_age);
+  out << YAML::EndMap;
+
+  out << YAML::Key << "initial_pose" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "pose" << YAML::Value;
+  emit_pose(out, c.initial_pose);
+  out << YAML::Key << "sigma" << YAML::Value;
+  emit_pose(out, c.initial_sigma);
+  out << YAML::EndMap;
+
+  out << YAML::Key << "output" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "dir" << YAML::Value << c.output.dir;
+  out << YAML::Key << "trajectory" << YAML::Value << yes_no(c.output.trajectory);
+  out << YAML::Key << "map" << YAML::Value << yes_no(c.output.map);
+  out << YAML::Key << "summary" << YAML::Value << yes_no(c.output.summary);
+  out << YAML::Key << "picture" << YAML::Value << yes_no(c.output.picture);
+  out << YAML::Key << "picture_size" << YAML::Value << std::to_string(c.output.picture_size);
+  out << YAML::EndMap;
+}
+
+}  // namespace
+
+std::string expand_env_vars(const std::string& text) {
+  std::string out;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    const std::size_t start = text.find("${", pos);
+    if (start == std::string::npos) break;
+    const std::size_t end = text.find('}', start);
+    if (end == std::string::npos) throw std::invalid_argument("unterminated '${' in '" + text + "'");
+    out.append(text, pos, start - pos);
+    const std::string body = text.substr(start + 2, end - start - 2);
+    const std::size_t sep = body.find(":-");
+    const std::string var = body.substr(0, sep);
+    const char* value = std::getenv(var.c_str());
+    const bool has_default = sep != std::string::npos;
+    if (value != nullptr && (*value != '\0' || !has_default)) {
+      out += value;
+    } else if (has_default) {
+      out += body.substr(sep + 2);
+    } else {
+      throw std::invalid_argument("environment variable '" + var + "' is not set (write ${" + var +
+                                  ":-default} to give a default)");
+    }
+    pos = end + 1;
+  }
+  out.append(text, pos, std::string::npos);
+  return out;
+}
+
+RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    throw ConfigError(file_name_for_messages + ":" + std::to_string(e.mark.line + 1) + ":" +
+                      std::to_string(e.mark.column + 1) + ": YAML syntax error: " + e.msg);
+  }
+  return Reader(file_name_for_messages, registry).read_document(root);
+}
+
+RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry) {
+  std::ifstream in(file);
+  if (!in) throw ConfigError(file.string() + ": cannot read the configuration file");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return parse_config(text.str(), file.string(), registry);
+}
+
+std::string effective_config_yaml(const RunConfig& c) {
+  YAML::Emitter out;
+  out << YAML::BeginMap;
+  emit_run(out, c);
+  const std::pair<const char*, const InstanceConfig*> singletons[] = {
+      {"source", &c.source}, {"motion", &c.motion}, {"estimator", &c.estimator}};
+  for (const auto& [key, section] : singletons) {
+    out << YAML::Key << key << YAML::Value;
+    emit_instance_body(out, *section);
+  }
+  out << YAML::Key << "features" << YAML::Value << YAML::BeginMap;
+  for (const InstanceConfig& feature : c.features) {
+    out << YAML::Key << feature.instance << YAML::Value;
+    emit_instance_body(out, feature);
+  }
+  out << YAML::EndMap;
+  emit_sensors(out, c.sensors);
+  emit_tail(out, c);
+  out << YAML::EndMap;
+  return "# Effective configuration of " + c.file.string() + " (defaults filled in; angles in degrees)\n" +
+         out.c_str() + "\n";
+}
+
+}  // namespace mspace::kernel

@@ -1,0 +1,107 @@
+// config.hpp — a run's YAML configuration, parsed and validated.
+//
+// Layout of a run file (every key is optional unless marked required):
+//
+//   run:          {name, log_level: info, max_steps: 0 (= all), plugin_path: [dirs], seed}
+//   source:       {plugin: <name>, <parameters>}                        # required
+//   motion:       {plugin: <name>, <parameters>}                        # required
+//   estimator:    {plugin: <name>, <parameters>}                        # required
+//   features:     {<instance>: {plugin: <name>, <parameters>}, ...}     # required, >= 1
+//   sensors:                                                            # required, >= 1
+//     <sensor>:
+//       channel: <data channel, default = sensor name>
+//       mount: [x, y, z, theta, phi, psi]   # required; x_rs, angles in degrees
+//       extractor: {plugin: <name>, <parameters>}                       # required
+//       feeds: [<feature instances>]                                    # required
+//   association:  {gate_probability: 0.99, new_feature_probability: 0.9999, tentative_max_age: 20}
+//   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
+//   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000}
+//
+// Plugin parameters are checked against the plugin's descriptor (loaded
+// through the registry) and completed with their defaults. String values may
+// use ${VAR} and ${VAR:-default}. Every problem is a ConfigError
+// "<file>:<line>:<col>: <dotted.key>: <problem>". Angles are stored in radians.
+// Relative directories (output.dir, run.plugin_path) are relative to the
+// working directory; data paths inside plugin parameters are the plugins'.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "mspace/params.hpp"
+#include "mspace/pose.hpp"
+#include "plugin_registry.hpp"
+
+namespace mspace::kernel {
+
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// One plugin instance: its name, its plugin and the complete parameters.
+struct InstanceConfig {
+  std::string instance;  ///< "source", "motion", "estimator", a feature instance or a sensor name
+  std::string plugin;
+  Params params;      ///< every declared parameter, defaults filled in
+  std::string where;  ///< "file:line" of the instance in the YAML, for messages
+};
+
+struct SensorConfig {
+  std::string name;
+  std::string channel;             ///< the data channel whose readings this sensor extracts
+  Pose6 mount = Pose6::Zero();     ///< x_rs: sensor pose on the robot (radians)
+  InstanceConfig extractor;        ///< instance name = sensor name
+  std::vector<std::string> feeds;  ///< feature instances its measurements go to
+};
+
+struct AssociationConfig {
+  double gate_probability = 0.99;
+  double new_feature_probability = 0.9999;
+  int tentative_max_age = 20;  ///< steps
+};
+
+struct OutputConfig {
+  std::string dir;  ///< default "out/<run name>"
+  bool trajectory = true, map = true, summary = true, picture = true;
+  int picture_size = 1000;  ///< pixels
+};
+
+struct RunConfig {
+  std::filesystem::path file;
+  std::string name;
+  std::string log_level = "info";
+  std::int64_t max_steps = 0;  ///< 0 = all
+  std::vector<std::string> plugin_path;
+  std::optional<std::int64_t> seed;
+  InstanceConfig source, motion, estimator;
+  std::vector<InstanceConfig> features;
+  std::vector<SensorConfig> sensors;
+  AssociationConfig association;
+  Pose6 initial_pose = Pose6::Zero();                                               ///< radians
+  Eigen::Matrix<double, 6, 1> initial_sigma = Eigen::Matrix<double, 6, 1>::Zero();  ///< radians for angles
+  OutputConfig output;
+};
+
+/// Reads and validates a run file. Directories of run.plugin_path are added to
+/// `registry`, and the plugins the run names are loaded to check parameters.
+RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry);
+
+/// Same, from text; `file_name_for_messages` prefixes every error message and
+/// its stem is the default run name.
+RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry);
+
+/// The fully resolved configuration (every parameter with its effective value)
+/// as YAML text in the run-file layout; parse_config accepts it back.
+std::string effective_config_yaml(const RunConfig& config);
+
+/// Expands ${VAR} and ${VAR:-default} (default used when VAR is unset or
+/// empty). Throws std::invalid_argument for an unset variable without default
+/// or an unterminated "${".
+std::string expand_env_vars(const std::string& text);
+
+}  // namespace mspace::kernel
