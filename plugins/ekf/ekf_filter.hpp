@@ -1,0 +1,70 @@
+// ekf_filter.hpp — the M-space extended Kalman filter (T-RO 2007, §V-B).
+//
+// The filter estimates the covariance of the state perturbation (eq. 23)
+//
+//   δx_state = (δx_r, δx_p)
+//
+// robot pose coordinates first (indices 0..k−1, set by reset()), then the
+// M-space perturbations of the features in the order augment() appended them.
+// There is no state vector and no feature coordinate in here: update() returns
+// δx_state and the caller moves the robot and hands δx_p to the features
+// (eq. 24).
+//
+// Storage. The symmetric covariance C_state is kept as the lower triangle of
+// the top-left dim()×dim() block of a square capacity×capacity matrix; the
+// strict upper triangle is never read or written. The capacity doubles when
+// augment() needs more room, so appending rows costs amortised O(N·new).
+//
+// Symmetric inputs (P_rr, Q, C_eta, C_new) are read from their lower triangle.
+//
+// Errors (all thrown before anything is changed):
+//   std::invalid_argument — wrong sizes, indices out of range or repeated, or a
+//     non-finite entry; the message names the matrix and the row, e.g.
+//     "ekf update: observation 2: J row 1 is not finite".
+//   std::runtime_error — the innovation covariance is not positive definite:
+//     "ekf update: S (6 x 6) is not positive definite".
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "mspace/estimator.hpp"
+
+namespace mspace::ekf {
+
+class EkfFilter final : public Estimator {
+ public:
+  /// `initial_capacity`: state rows to allocate room for at reset() (≥ 1).
+  explicit EkfFilter(int initial_capacity = 64);
+
+  void reset(const Eigen::MatrixXd& P_rr) override;
+  int dim() const override { return n_; }
+  void predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) override;
+  Eigen::VectorXd update(const std::vector<LinearizedObservation>& obs) override;
+  int augment(const StateAugmentation& aug) override;
+  Eigen::MatrixXd marginal(const std::vector<int>& idx) const override;
+  Eigen::MatrixXd cross(const std::vector<int>& rows, const std::vector<int>& cols) const override;
+  void remove(std::vector<int> idx) override;
+
+  /// Robot pose dimension k given to reset().
+  int robot_dim() const { return k_; }
+  /// State rows the storage holds before it has to grow.
+  int capacity() const { return static_cast<int>(store_.rows()); }
+  /// Grows the storage to hold at least `rows` state rows (never shrinks).
+  void reserve(int rows);
+  /// The whole covariance C_state (dim() × dim()), for tests and diagnostics.
+  Eigen::MatrixXd covariance() const;
+
+ private:
+  /// C_state(i, j) read from the lower triangle.
+  double at(int i, int j) const { return i >= j ? store_(i, j) : store_(j, i); }
+  /// C_state[:, cols] (dim() × cols.size()).
+  Eigen::MatrixXd gather_columns(const std::vector<int>& cols) const;
+
+  int initial_capacity_;
+  int k_ = 0;              ///< robot pose dimension
+  int n_ = 0;              ///< state dimension
+  Eigen::MatrixXd store_;  ///< capacity × capacity; lower triangle of [0,n_)² is C_state
+};
+
+}  // namespace mspace::ekf
