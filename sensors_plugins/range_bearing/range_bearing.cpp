@@ -1,1 +1,118 @@
-// placeholder
+// range_bearing.cpp — see range_bearing.hpp.
+#include "range_bearing.hpp"
+
+#include <Eigen/Core>
+#include <charconv>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+namespace mspace::range_bearing {
+namespace {
+
+double deg_to_rad(double deg) { return deg * std::numbers::pi / 180.0; }
+
+/// Shortest text that reads back as the same double (time stamps need all
+/// their digits, "12.5" should not print as "12.500000").
+std::string format_number(double x) {
+  char buf[64];
+  const auto result = std::to_chars(buf, buf + sizeof buf, x);
+  return std::string(buf, result.ptr);
+}
+
+/// "channel 'laser', t = 12.5 s, row 3: " — the prefix of every error.
+std::string where(const SensorReading& reading, Eigen::Index row) {
+  return "range_bearing: channel '" + reading.channel + "', t = " + format_number(reading.t) +
+         " s, row " + std::to_string(row) + ": ";
+}
+
+void check_columns(const SensorReading& reading) {
+  const Eigen::Index cols = reading.values.cols();
+  if (reading.values.rows() > 0 && cols != 2 && cols != 3) {
+    throw std::runtime_error(where(reading, 0) + std::to_string(cols) +
+                             " columns, expected 2 (range, bearing) or 3 (range, bearing, "
+                             "elevation)");
+  }
+}
+
+void check_finite(const SensorReading& reading, Eigen::Index row) {
+  if (!reading.values.row(row).allFinite()) {
+    std::string values;
+    for (Eigen::Index c = 0; c < reading.values.cols(); ++c) {
+      values += (c == 0 ? "" : ", ") + format_number(reading.values(row, c));
+    }
+    throw std::runtime_error(where(reading, row) + "non-finite value in (" + values + ")");
+  }
+}
+
+double positive(const Params& params, const char* name) {
+  const double value = params.get_double(name);
+  if (!(value > 0.0)) {
+    throw std::invalid_argument(std::string("range_bearing: parameter '") + name +
+                                "' must be > 0 (it is " + format_number(value) + ")");
+  }
+  return value;
+}
+
+}  // namespace
+
+std::vector<ParamSpec> RangeBearingExtractor::param_specs() {
+  return {
+      param_double("range_sigma", 0.05, "range noise standard deviation (m), > 0", 0.0, 100.0),
+      param_double("bearing_sigma_deg", 1.0, "bearing noise standard deviation (deg), > 0", 0.0,
+                   180.0),
+      param_double("elevation_sigma_deg", 2.0,
+                   "elevation noise standard deviation (deg), > 0; for 2-column readings "
+                   "(planar sensor) the vertical beam width: elevation is taken as 0 with this "
+                   "standard deviation",
+                   0.0, 90.0),
+      param_double("min_range", 0.1, "readings closer than this are dropped (m)", 0.0),
+      param_double("max_range", 30.0, "readings farther than this are dropped (m)", 0.0),
+  };
+}
+
+RangeBearingExtractor::RangeBearingExtractor(const PluginArgs& args) : log_(&args.log()) {
+  const Params& p = args.params;
+  config_.range_sigma = positive(p, "range_sigma");
+  config_.bearing_sigma = deg_to_rad(positive(p, "bearing_sigma_deg"));
+  config_.elevation_sigma = deg_to_rad(positive(p, "elevation_sigma_deg"));
+  config_.min_range = p.get_double("min_range");
+  config_.max_range = p.get_double("max_range");
+  if (config_.min_range > config_.max_range) {
+    throw std::invalid_argument("range_bearing: min_range (" + format_number(config_.min_range) +
+                                ") is larger than max_range (" + format_number(config_.max_range) +
+                                ")");
+  }
+}
+
+void RangeBearingExtractor::extract(const SensorReading& reading, std::vector<Measurement>& out) {
+  check_columns(reading);
+  const Eigen::Vector3d variances(config_.range_sigma * config_.range_sigma,
+                                  config_.bearing_sigma * config_.bearing_sigma,
+                                  config_.elevation_sigma * config_.elevation_sigma);
+  const bool planar = reading.values.cols() == 2;
+  int dropped = 0;
+  for (Eigen::Index row = 0; row < reading.values.rows(); ++row) {
+    check_finite(reading, row);
+    const double range = reading.values(row, 0);
+    if (range < config_.min_range || range > config_.max_range) {
+      ++dropped;
+      continue;
+    }
+    Measurement m;
+    m.kind = kMeasurementKind;
+    // A planar sensor sees the object in its scan plane: elevation 0, with
+    // the beam width as its standard deviation (see the header).
+    m.v = Eigen::Vector3d(range, reading.values(row, 1), planar ? 0.0 : reading.values(row, 2));
+    m.C_v = variances.asDiagonal();
+    out.push_back(std::move(m));
+  }
+  if (dropped > 0) {
+    log_->debug("channel '", reading.channel, "' t=", reading.t, ": dropped ", dropped, " of ",
+                reading.values.rows(), " readings outside [", config_.min_range, ", ",
+                config_.max_range, "] m");
+  }
+}
+
+}  // namespace mspace::range_bearing

@@ -1,0 +1,64 @@
+// range_bearing.hpp — the `range_bearing` extractor: rows of (range, bearing)
+// or (range, bearing, elevation) become point measurements.
+//
+// Each row of a SensorReading's `values` is one detected object, in metres and
+// radians in the sensor frame:
+//   2 columns: (r, b)     — a planar sensor (e.g. a laser scanner),
+//   3 columns: (r, b, e)  — a 3-D sensor.
+// Every row becomes a Measurement of kind "range_bearing_elevation" with
+// v = (r, b, e) and C_v = diag(σr², σb², σe²).
+//
+// Planar sensors. A 2-D sensor cannot measure elevation, but it does not see
+// objects far from its scan plane either: its vertical beam width limits
+// what it detects to elevations within about ± that angle. So a 2-column row
+// is turned into a 3-D measurement with e = 0 and σe = `elevation_sigma_deg`,
+// the beam width. Point features built from it then sit in the scan plane
+// with an honest vertical uncertainty, and the same point feature type
+// serves 2-D and 3-D sensors. For 3-column rows `elevation_sigma_deg` is the
+// ordinary elevation noise.
+//
+// Rows with a range outside [min_range, max_range] are dropped. A reading
+// with non-finite numbers or a column count other than 2 or 3 is an error
+// (std::runtime_error naming the channel, the time stamp and the row).
+#pragma once
+
+#include <vector>
+
+#include "mspace/extractor.hpp"
+#include "mspace/params.hpp"
+#include "mspace/plugin.hpp"
+
+namespace mspace::range_bearing {
+
+/// The measurement kind this extractor produces.
+inline constexpr const char* kMeasurementKind = "range_bearing_elevation";
+
+/// The extractor's settings, with angles already converted to radians.
+struct RangeBearingConfig {
+  double range_sigma = 0.05;     ///< σr (m)
+  double bearing_sigma = 0.0;    ///< σb (rad)
+  double elevation_sigma = 0.0;  ///< σe (rad); the vertical beam width for 2-column rows
+  double min_range = 0.0;        ///< shorter readings are dropped (m)
+  double max_range = 0.0;        ///< longer readings are dropped (m)
+};
+
+class RangeBearingExtractor : public Extractor {
+ public:
+  /// The declared parameters: range_sigma, bearing_sigma_deg,
+  /// elevation_sigma_deg, min_range, max_range.
+  static std::vector<ParamSpec> param_specs();
+
+  /// Reads the parameters; throws std::invalid_argument when a standard
+  /// deviation is not positive or min_range > max_range.
+  explicit RangeBearingExtractor(const PluginArgs& args);
+
+  void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
+
+  const RangeBearingConfig& config() const { return config_; }
+
+ private:
+  RangeBearingConfig config_;
+  Logger* log_;
+};
+
+}  // namespace mspace::range_bearing
