@@ -1,1 +1,147 @@
-int main() { return 0; }
+// mspace — the command line tool.
+//
+//   mspace run [CONFIG] [--out DIR]   a SLAM run (the built-in simulated world without CONFIG)
+//   mspace plugins                    every plugin found, with kind, ABI tag and parameters
+//   mspace config [CONFIG]            the fully resolved configuration
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "config.hpp"
+#include "default_config.hpp"
+#include "logging.hpp"
+#include "mspace/abi.hpp"
+#include "plugin_registry.hpp"
+#include "runner.hpp"
+#include "slam.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+
+struct CommonOptions {
+  std::vector<std::string> plugin_files;
+  std::vector<std::string> plugin_dirs;
+  std::string log_level;
+};
+
+void add_common(CLI::App* cmd, CommonOptions& o) {
+  cmd->add_option("--plugin", o.plugin_files, "load this plugin library (repeatable)");
+  cmd->add_option("--plugin-dir", o.plugin_dirs, "also search this folder for plugins (repeatable)");
+  cmd->add_option("--log-level", o.log_level, "trace, debug, info, warn, error or off (overrides the YAML)");
+}
+
+void setup_registry(PluginRegistry& registry, const CommonOptions& o) {
+  for (const auto& dir : o.plugin_dirs) registry.add_search_dir(dir);
+  for (const auto& dir : PluginRegistry::default_search_dirs()) registry.add_search_dir(dir);
+  for (const auto& file : o.plugin_files) registry.add_plugin_file(file);
+}
+
+RunConfig load(const std::string& file, PluginRegistry& registry) {
+  if (file.empty()) return parse_config(default_config_text(), default_config_name(), registry);
+  return load_config(file, registry);
+}
+
+int cmd_run(const std::string& file, const std::string& out, long long max_steps, bool quiet,
+            const CommonOptions& common) {
+  PluginRegistry registry;
+  setup_registry(registry, common);
+  RunConfig config = load(file, registry);
+  for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
+  set_log_level(parse_log_level(common.log_level.empty() ? config.log_level : common.log_level));
+  if (!out.empty()) config.output.dir = out;
+  if (max_steps > 0) config.max_steps = max_steps;
+  kernel_log().info("configuration ", file.empty() ? default_config_name() : file, ":\n",
+                    effective_config_yaml(config));
+  Slam slam(config, registry);
+  RunOptions options;
+  options.progress = !quiet;
+  const RunResult result = run_to_end(slam, options);
+  std::cout << format_summary(result.summary, slam);
+  std::cout << "  outputs in " << result.output_dir.string() << "/ (trajectory.tum, map.yaml, summary.yaml, map.png)\n";
+  return 0;
+}
+
+int cmd_plugins(const CommonOptions& common) {
+  PluginRegistry registry;
+  setup_registry(registry, common);
+  std::vector<std::string> errors;
+  const auto plugins = registry.load_all(&errors);
+  std::cout << "SDK ABI tag: " << MSPACE_ABI_TAG << "\n";
+  std::cout << "searched: ";
+  for (const auto& dir : registry.search_dirs()) std::cout << dir.string() << "  ";
+  std::cout << "\n\n";
+  for (const auto& p : plugins) {
+    const PluginDescriptor& d = *p->descriptor;
+    std::cout << d.name << "  [" << plugin_kind_name(d.kind) << "]  " << p->path.string() << "\n";
+    std::cout << "    " << d.description << "\n";
+    std::cout << "    ABI " << d.abi_tag << "\n";
+    for (const ParamSpec& s : d.params) {
+      std::cout << "    - " << s.name << " (" << param_type_name(s.type) << ")";
+      if (s.required)
+        std::cout << " required";
+      else
+        std::cout << " = " << format_param(s.default_value);
+      if (std::isfinite(s.min) || std::isfinite(s.max)) std::cout << "  range [" << s.min << ", " << s.max << "]";
+      if (!s.choices.empty()) {
+        std::cout << "  one of:";
+        for (const auto& c : s.choices) std::cout << ' ' << c;
+      }
+      std::cout << "\n        " << s.description << "\n";
+    }
+    std::cout << "\n";
+  }
+  for (const auto& e : errors) std::cerr << "error: " << e << "\n";
+  return errors.empty() ? 0 : 1;
+}
+
+int cmd_config(const std::string& file, const CommonOptions& common) {
+  PluginRegistry registry;
+  setup_registry(registry, common);
+  const RunConfig config = load(file, registry);
+  std::cout << effective_config_yaml(config);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"mspace — feature-based SLAM on the M-space feature representation"};
+  app.set_version_flag("--version", std::string("mspace 0.1.0, SDK ABI ") + MSPACE_ABI_TAG);
+  app.require_subcommand(1);
+
+  CommonOptions common;
+  std::string run_file, out_dir;
+  long long max_steps = 0;
+  bool quiet = false;
+  CLI::App* run = app.add_subcommand("run", "run SLAM as a YAML file describes (the built-in simulated world without one)");
+  run->add_option("config", run_file, "YAML run configuration");
+  run->add_option("--out", out_dir, "output folder (overrides output.dir)");
+  run->add_option("--max-steps", max_steps, "stop after this many steps");
+  run->add_flag("--quiet", quiet, "no progress output");
+  add_common(run, common);
+
+  CLI::App* plugins = app.add_subcommand("plugins", "list every plugin found with kind, ABI tag and parameters");
+  add_common(plugins, common);
+
+  std::string config_file;
+  CLI::App* config = app.add_subcommand("config", "print the fully resolved configuration");
+  config->add_option("config", config_file, "YAML run configuration (the built-in one without)");
+  add_common(config, common);
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, quiet, common);
+    if (plugins->parsed()) return cmd_plugins(common);
+    if (config->parsed()) return cmd_config(config_file, common);
+  } catch (const std::exception& e) {
+    std::cerr << "mspace: error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,1 +1,198 @@
-// placeholder
+#include "outputs.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <numbers>
+#include <sstream>
+#include <stdexcept>
+
+#include <yaml-cpp/yaml.h>
+
+#include "slam.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+
+std::ofstream open_for_writing(const std::filesystem::path& file) {
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
+  std::ofstream out(file);
+  if (!out) throw std::runtime_error("cannot write '" + file.string() + "'");
+  out.precision(9);
+  return out;
+}
+
+void emit_vector(YAML::Emitter& y, const Eigen::VectorXd& v) {
+  y << YAML::Flow << YAML::BeginSeq;
+  for (Eigen::Index i = 0; i < v.size(); ++i) y << v[i];
+  y << YAML::EndSeq;
+}
+
+void emit_matrix(YAML::Emitter& y, const Eigen::MatrixXd& m) {
+  y << YAML::BeginSeq;
+  for (Eigen::Index r = 0; r < m.rows(); ++r) emit_vector(y, m.row(r).transpose());
+  y << YAML::EndSeq;
+}
+
+}  // namespace
+
+RunSummary summarize(const Slam& slam, double wall_seconds) {
+  RunSummary s;
+  s.run_name = slam.config().name;
+  s.config_file = slam.config().file.string();
+  s.steps = slam.stats().steps;
+  s.wall_seconds = wall_seconds;
+  const auto& traj = slam.trajectory();
+  if (!traj.empty()) s.data_seconds = traj.back().t - traj.front().t;
+  s.state_dimension = static_cast<int>(slam.robot_dofs().size());
+  for (const FeatureTypeSlot& type : slam.feature_types()) s.features_by_dim[type.instance];
+  for (const MapFeature& f : slam.features()) {
+    const int dim = f.feature->mspace_dim();
+    ++s.features_by_dim[slam.feature_types()[f.type].instance][dim];
+    s.state_dimension += dim;
+  }
+  if (!slam.ground_truth().empty()) {
+    s.errors = evaluate_trajectory(traj, slam.ground_truth(), 1e-6);
+    const auto& nees = slam.stats().nees;
+    double sum = 0.0;
+    for (double v : nees) sum += v;
+    s.mean_nees = nees.empty() ? 0.0 : sum / static_cast<double>(nees.size());
+    s.nees_dof = static_cast<int>(slam.robot_dofs().size());
+  }
+  return s;
+}
+
+void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
+  std::ofstream out = open_for_writing(file);
+  out << "# t x y z qx qy qz qw\n";
+  for (const StampedPose& p : poses) {
+    const Eigen::Vector4d q = quaternion_xyzw(p.pose);
+    out << std::fixed << std::setprecision(6) << p.t << ' ' << std::setprecision(6) << p.pose[kX] << ' '
+        << p.pose[kY] << ' ' << p.pose[kZ] << ' ' << std::setprecision(9) << q[0] << ' ' << q[1] << ' ' << q[2]
+        << ' ' << q[3] << '\n';
+  }
+}
+
+void write_map_yaml(const std::filesystem::path& file, const Slam& slam) {
+  YAML::Emitter y;
+  y.SetDoublePrecision(9);
+  y << YAML::BeginMap;
+  y << YAML::Key << "run" << YAML::Value << slam.config().name;
+  y << YAML::Key << "robot_pose" << YAML::Value;
+  emit_vector(y, slam.pose());
+  y << YAML::Comment("x y z theta phi psi (m, rad)");
+  y << YAML::Key << "features" << YAML::Value << YAML::BeginSeq;
+  for (const MapFeature& f : slam.features()) {
+    const FeatureTypeSlot& type = slam.feature_types()[f.type];
+    y << YAML::BeginMap;
+    y << YAML::Key << "id" << YAML::Value << f.id;
+    y << YAML::Key << "type" << YAML::Value << type.instance;
+    y << YAML::Key << "plugin" << YAML::Value << type.plugin;
+    y << YAML::Key << "layout" << YAML::Value << f.feature->layout().describe();
+    y << YAML::Key << "coords" << YAML::Value;
+    emit_vector(y, f.feature->coords());
+    y << YAML::Key << "mspace_dim" << YAML::Value << f.feature->mspace_dim();
+    y << YAML::Key << "observations" << YAML::Value << f.times_matched + 1;
+    if (!f.state_idx.empty()) {
+      y << YAML::Key << "covariance" << YAML::Value;
+      emit_matrix(y, slam.feature_covariance(f));
+    }
+    y << YAML::EndMap;
+  }
+  y << YAML::EndSeq << YAML::EndMap;
+  std::ofstream out = open_for_writing(file);
+  out << "# mspace map: every feature with its coordinates x_f (map frame), its M-space\n"
+         "# dimension and the covariance of its M-space perturbations.\n"
+      << y.c_str() << '\n';
+}
+
+void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, const Slam& slam) {
+  const RunStats& st = slam.stats();
+  YAML::Emitter y;
+  y.SetDoublePrecision(6);
+  y << YAML::BeginMap;
+  y << YAML::Key << "run" << YAML::Value << s.run_name;
+  y << YAML::Key << "config" << YAML::Value << s.config_file;
+  y << YAML::Key << "steps" << YAML::Value << s.steps;
+  y << YAML::Key << "data_seconds" << YAML::Value << s.data_seconds;
+  y << YAML::Key << "wall_seconds" << YAML::Value << s.wall_seconds;
+  y << YAML::Key << "state_dimension" << YAML::Value << s.state_dimension;
+  y << YAML::Key << "counts" << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "readings" << YAML::Value << st.readings;
+  y << YAML::Key << "measurements" << YAML::Value << st.measurements;
+  y << YAML::Key << "matched" << YAML::Value << st.matched;
+  y << YAML::Key << "used_in_updates" << YAML::Value << st.updates;
+  y << YAML::Key << "features_created" << YAML::Value << st.created;
+  y << YAML::Key << "extensions" << YAML::Value << st.extended;
+  y << YAML::Key << "tentative_pruned" << YAML::Value << st.pruned;
+  y << YAML::Key << "readings_without_sensor" << YAML::Value << st.unknown_channel_readings;
+  y << YAML::EndMap;
+  y << YAML::Key << "features" << YAML::Value << YAML::BeginMap;
+  for (const auto& [type, by_dim] : s.features_by_dim) {
+    y << YAML::Key << type << YAML::Value << YAML::BeginMap;
+    for (const auto& [dim, count] : by_dim) y << YAML::Key << ("dim" + std::to_string(dim)) << YAML::Value << count;
+    y << YAML::EndMap;
+  }
+  y << YAML::EndMap;
+  y << YAML::Key << "timings_seconds" << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "source" << YAML::Value << st.seconds_source;
+  y << YAML::Key << "predict" << YAML::Value << st.seconds_predict;
+  y << YAML::Key << "associate" << YAML::Value << st.seconds_associate;
+  y << YAML::Key << "update" << YAML::Value << st.seconds_update;
+  y << YAML::Key << "dense_information" << YAML::Value << st.seconds_dense;
+  y << YAML::Key << "extend" << YAML::Value << st.seconds_extend;
+  y << YAML::EndMap;
+  if (s.errors) {
+    const TrajectoryErrors& e = *s.errors;
+    y << YAML::Key << "ground_truth" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "poses_compared" << YAML::Value << e.matched;
+    y << YAML::Key << "ate_rmse_m" << YAML::Value << e.ate_rmse;
+    y << YAML::Key << "ate_median_m" << YAML::Value << e.ate_median;
+    y << YAML::Key << "ate_max_m" << YAML::Value << e.ate_max;
+    y << YAML::Key << "final_translation_error_m" << YAML::Value << e.final_translation;
+    y << YAML::Key << "final_heading_error_deg" << YAML::Value << e.final_heading * kRadToDeg;
+    y << YAML::Key << "mean_robot_nees" << YAML::Value << s.mean_nees;
+    y << YAML::Key << "nees_dof" << YAML::Value << s.nees_dof;
+    y << YAML::EndMap;
+  }
+  y << YAML::EndMap;
+  std::ofstream out = open_for_writing(file);
+  out << y.c_str() << '\n';
+}
+
+std::string format_summary(const RunSummary& s, const Slam& slam) {
+  const RunStats& st = slam.stats();
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(3);
+  os << "run '" << s.run_name << "': " << s.steps << " steps, " << s.data_seconds << " s of data in "
+     << s.wall_seconds << " s wall time";
+  if (s.wall_seconds > 0) os << " (" << std::setprecision(1) << s.data_seconds / s.wall_seconds << "x real time)";
+  os << std::setprecision(3) << "\n";
+  os << "  measurements " << st.measurements << ", matched " << st.matched << ", used in updates " << st.updates
+     << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned
+     << "\n";
+  os << "  state dimension " << s.state_dimension << "\n";
+  for (const auto& [type, by_dim] : s.features_by_dim) {
+    os << "  features '" << type << "':";
+    if (by_dim.empty()) os << " none";
+    for (const auto& [dim, count] : by_dim) os << "  " << count << " at dim " << dim;
+    os << "\n";
+  }
+  const double total = st.seconds_source + st.seconds_predict + st.seconds_associate + st.seconds_update +
+                       st.seconds_dense + st.seconds_extend;
+  os << "  time: source " << st.seconds_source << " s, predict " << st.seconds_predict << " s, associate "
+     << st.seconds_associate << " s, update " << st.seconds_update << " s, dense " << st.seconds_dense
+     << " s, extend " << st.seconds_extend << " s (total " << total << " s)\n";
+  if (s.errors) {
+    const TrajectoryErrors& e = *s.errors;
+    os << "  vs ground truth (" << e.matched << " poses): ATE RMSE " << e.ate_rmse << " m (median " << e.ate_median
+       << ", max " << e.ate_max << "), final error " << e.final_translation << " m / " << std::setprecision(2)
+       << e.final_heading * kRadToDeg << " deg, mean robot NEES " << s.mean_nees << " (" << s.nees_dof
+       << " dof)\n";
+  }
+  return os.str();
+}
+
+}  // namespace mspace::kernel

@@ -1,1 +1,151 @@
-// placeholder
+// picture.cpp — a top view of a run drawn with OpenCV: true landmarks, the
+// map's features shaded by M-space dimension (with 3σ ellipses of their point
+// blocks), the estimated and the true trajectory, a scale bar and a legend.
+// Generic: a feature is drawn from its coordinate blocks only (a point block
+// as a dot, several point blocks as a polyline through them).
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+#include <Eigen/Eigenvalues>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "outputs.hpp"
+#include "slam.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+struct View {
+  double min_x = 0, min_y = 0, scale = 1;  // pixels per metre
+  int size = 1000, margin = 40;
+  cv::Point px(double x, double y) const {
+    return {margin + static_cast<int>(std::lround((x - min_x) * scale)),
+            size - margin - static_cast<int>(std::lround((y - min_y) * scale))};
+  }
+};
+
+/// xy of every point block of a feature.
+std::vector<Eigen::Vector2d> point_blocks(const Feature& f) {
+  std::vector<Eigen::Vector2d> pts;
+  const CoordLayout& layout = f.layout();
+  for (int b = 0; b < layout.num_blocks(); ++b) {
+    if (layout.kind(b) == BlockKind::Scalar) continue;
+    pts.emplace_back(f.coords()[layout.offset(b)], f.coords()[layout.offset(b) + 1]);
+  }
+  return pts;
+}
+
+/// Shade by M-space dimension relative to the type's maximum: tentative
+/// features light grey, then from light to dark blue-violet.
+cv::Scalar dim_colour(int dim, int max_dim) {
+  if (dim == 0) return {200, 200, 200};
+  const double f = max_dim > 0 ? static_cast<double>(dim) / max_dim : 1.0;
+  return {static_cast<double>(230 - 150 * f), static_cast<double>(160 - 140 * f), static_cast<double>(120 - 100 * f)};
+}
+
+void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const Eigen::Matrix2d& cov,
+                  const cv::Scalar& colour) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
+  if (es.info() != Eigen::Success || es.eigenvalues().minCoeff() < 0) return;
+  const double k = 3.0;  // 3σ
+  const Eigen::Vector2d major = es.eigenvectors().col(1);
+  const double angle = -std::atan2(major.y(), major.x()) * 180.0 / std::numbers::pi;
+  const cv::Size axes(std::max(1, static_cast<int>(k * std::sqrt(es.eigenvalues()[1]) * v.scale)),
+                      std::max(1, static_cast<int>(k * std::sqrt(es.eigenvalues()[0]) * v.scale)));
+  cv::ellipse(img, v.px(c.x(), c.y()), axes, angle, 0, 360, colour, 1, cv::LINE_AA);
+}
+
+}  // namespace
+
+void write_picture(const std::filesystem::path& file, const Slam& slam, int size_px) {
+  // Bounds over everything drawn.
+  double lo_x = 1e300, lo_y = 1e300, hi_x = -1e300, hi_y = -1e300;
+  auto grow = [&](double x, double y) {
+    lo_x = std::min(lo_x, x), lo_y = std::min(lo_y, y), hi_x = std::max(hi_x, x), hi_y = std::max(hi_y, y);
+  };
+  for (const StampedPose& p : slam.trajectory()) grow(p.pose[kX], p.pose[kY]);
+  for (const StampedPose& p : slam.ground_truth()) grow(p.pose[kX], p.pose[kY]);
+  for (const MapFeature& f : slam.features())
+    if (f.feature->mspace_dim() > 0)
+      for (const Eigen::Vector2d& p : point_blocks(*f.feature)) grow(p.x(), p.y());
+  const Eigen::MatrixXd truth = slam.true_landmarks();
+  for (Eigen::Index i = 0; i < truth.cols(); ++i) grow(truth(0, i), truth(1, i));
+  if (lo_x > hi_x) lo_x = lo_y = -1, hi_x = hi_y = 1;
+
+  View v;
+  v.size = size_px;
+  const double span = std::max({hi_x - lo_x, hi_y - lo_y, 1.0});
+  v.scale = (size_px - 2.0 * v.margin) / span;
+  v.min_x = lo_x - 0.5 * (span - (hi_x - lo_x));
+  v.min_y = lo_y - 0.5 * (span - (hi_y - lo_y));
+  cv::Mat img(size_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+
+  // Grid every 10 m (or 1 m for small worlds).
+  const double grid = span > 30 ? 10.0 : 1.0;
+  for (double gx = std::floor(v.min_x / grid) * grid; gx <= v.min_x + span; gx += grid)
+    cv::line(img, v.px(gx, v.min_y), v.px(gx, v.min_y + span), {235, 235, 235}, 1);
+  for (double gy = std::floor(v.min_y / grid) * grid; gy <= v.min_y + span; gy += grid)
+    cv::line(img, v.px(v.min_x, gy), v.px(v.min_x + span, gy), {235, 235, 235}, 1);
+
+  for (Eigen::Index i = 0; i < truth.cols(); ++i)
+    cv::drawMarker(img, v.px(truth(0, i), truth(1, i)), {120, 120, 120}, cv::MARKER_CROSS, 9, 1, cv::LINE_AA);
+
+  auto polyline = [&](const std::vector<StampedPose>& poses, const cv::Scalar& colour, int width) {
+    std::vector<cv::Point> pts;
+    pts.reserve(poses.size());
+    for (const StampedPose& p : poses) pts.push_back(v.px(p.pose[kX], p.pose[kY]));
+    if (pts.size() > 1) cv::polylines(img, pts, false, colour, width, cv::LINE_AA);
+  };
+  polyline(slam.ground_truth(), {60, 170, 60}, 2);
+  polyline(slam.trajectory(), {200, 80, 30}, 1);
+
+  for (const MapFeature& f : slam.features()) {
+    const int dim = f.feature->mspace_dim();
+    const int max_dim = slam.feature_types()[f.type].type->max_mspace_dim();
+    const cv::Scalar colour = dim_colour(dim, max_dim);
+    const std::vector<Eigen::Vector2d> pts = point_blocks(*f.feature);
+    if (pts.size() >= 2) {
+      for (std::size_t i = 0; i + 1 < pts.size(); ++i)
+        cv::line(img, v.px(pts[i].x(), pts[i].y()), v.px(pts[i + 1].x(), pts[i + 1].y()), colour, 2, cv::LINE_AA);
+    } else if (pts.size() == 1) {
+      cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
+    }
+    if (dim == 0) continue;
+    // Covariance of x_f implied by the M-space covariance: B̃ P B̃ᵀ (eq. 11).
+    const Eigen::MatrixXd Bd = f.feature->B_dual();
+    const Eigen::MatrixXd C = Bd * slam.feature_covariance(f) * Bd.transpose();
+    const CoordLayout& layout = f.feature->layout();
+    for (int b = 0, p = 0; b < layout.num_blocks(); ++b) {
+      if (layout.kind(b) == BlockKind::Scalar) continue;
+      const int o = layout.offset(b);
+      draw_ellipse(img, v, pts[p++], C.block<2, 2>(o, o), colour);
+    }
+  }
+
+  // Scale bar and legend.
+  const double bar = grid;
+  const cv::Point bar0(v.margin, size_px - v.margin / 2);
+  cv::line(img, bar0, bar0 + cv::Point(static_cast<int>(bar * v.scale), 0), {0, 0, 0}, 2);
+  cv::putText(img, std::to_string(static_cast<int>(bar)) + " m", bar0 + cv::Point(5, -6), cv::FONT_HERSHEY_SIMPLEX,
+              0.45, {0, 0, 0}, 1, cv::LINE_AA);
+  int row = 20;
+  auto legend = [&](const std::string& text, const cv::Scalar& colour) {
+    cv::line(img, {10, row - 4}, {30, row - 4}, colour, 3);
+    cv::putText(img, text, {36, row}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
+    row += 18;
+  };
+  legend("estimated trajectory", {200, 80, 30});
+  if (!slam.ground_truth().empty()) legend("true trajectory", {60, 170, 60});
+  if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
+  legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
+  cv::putText(img, slam.config().name, {size_px - 220, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
+
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
+  if (!cv::imwrite(file.string(), img)) throw std::runtime_error("cannot write picture '" + file.string() + "'");
+}
+
+}  // namespace mspace::kernel

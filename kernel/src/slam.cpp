@@ -1,1 +1,517 @@
-// placeholder
+#include "slam.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <sstream>
+#include <unordered_map>
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+
+#include "chi2.hpp"
+#include "logging.hpp"
+#include "mspace/transform.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// The path "distance" used to age dense information weighs a radian of
+/// rotation like this many metres of travel: heading errors grow faster and
+/// do more harm than translation errors (ICRA §IV, "Add Information").
+constexpr double kRotationWeightMetresPerRadian = 2.0;
+
+bool all_finite(const Eigen::MatrixXd& m) { return m.allFinite(); }
+
+/// Throws a PluginError naming the instance when a plugin hands back NaN/inf.
+void require_finite(const Eigen::MatrixXd& m, const char* what, const std::string& instance,
+                    const LoadedPlugin& lib) {
+  if (all_finite(m)) return;
+  std::ostringstream os;
+  os << instance << " (plugin '" << lib.descriptor->name << "', library '" << lib.path.string()
+     << "'): " << what << " contains NaN or infinity";
+  throw PluginError(os.str());
+}
+
+Eigen::MatrixXd columns(const Eigen::MatrixXd& m, const std::vector<int>& cols) {
+  Eigen::MatrixXd out(m.rows(), static_cast<Eigen::Index>(cols.size()));
+  for (std::size_t j = 0; j < cols.size(); ++j) out.col(static_cast<Eigen::Index>(j)) = m.col(cols[j]);
+  return out;
+}
+
+}  // namespace
+
+/// One measurement of one reading that passed the gate of one feature.
+struct Slam::Candidate {
+  int measurement = 0;
+  int feature = 0;  ///< index into features_
+  double d2 = 0.0;  ///< squared Mahalanobis distance of the innovation
+  Innovation innovation;
+  Eigen::MatrixXd C_eta;    ///< J_ηv C_v J_ηvᵀ
+  Eigen::MatrixXd J_state;  ///< m × (k + dim): J_ηo (J_os J_sr  J_of B̃), eq. 30
+};
+
+struct Slam::Match {
+  int feature = 0;
+  int sensor = 0;
+  int measurement = 0;  ///< index into the reading's measurements
+  Candidate candidate;
+};
+
+/// What phases 3 and 4 need from one reading.
+struct Slam::ReadingWork {
+  int sensor = 0;
+  double t = 0.0;
+  std::vector<Measurement> measurements;
+  std::vector<Match> matches;
+  std::vector<bool> may_create;  ///< per measurement: far from every feature
+};
+
+Slam::Slam(const RunConfig& config, PluginRegistry& registry) : config_(config) {
+  log_ = make_instance_logger("slam");
+  auto make = [&](const InstanceConfig& inst, PluginKind kind, auto* tag,
+                  std::shared_ptr<const LoadedPlugin>& lib) {
+    using T = std::remove_pointer_t<decltype(tag)>;
+    auto logger = make_instance_logger(inst.instance);
+    plugin_loggers_.push_back(logger);
+    PluginArgs args{inst.instance, inst.params, logger.get()};
+    lib = registry.load(inst.plugin);
+    return registry.create<T>(inst.plugin, kind, args);
+  };
+  source_ = make(config_.source, PluginKind::Source, static_cast<DataSource*>(nullptr), source_lib_);
+  motion_ = make(config_.motion, PluginKind::MotionModel, static_cast<MotionModel*>(nullptr), motion_lib_);
+  estimator_ = make(config_.estimator, PluginKind::Estimator, static_cast<Estimator*>(nullptr), estimator_lib_);
+
+  for (const InstanceConfig& fc : config_.features) {
+    FeatureTypeSlot slot;
+    slot.instance = fc.instance;
+    slot.plugin = fc.plugin;
+    slot.type = make(fc, PluginKind::Feature, static_cast<FeatureType*>(nullptr), slot.library);
+    types_.push_back(std::move(slot));
+  }
+  for (const SensorConfig& sc : config_.sensors) {
+    SensorSlot slot;
+    slot.config = sc;
+    slot.extractor = make(sc.extractor, PluginKind::Extractor, static_cast<Extractor*>(nullptr), slot.library);
+    for (const std::string& feed : sc.feeds) {
+      for (std::size_t i = 0; i < types_.size(); ++i)
+        if (types_[i].instance == feed) slot.feeds.push_back(static_cast<int>(i));
+    }
+    sensors_.push_back(std::move(slot));
+  }
+
+  dofs_ = guarded(config_.motion.instance, *motion_lib_, "estimated_dofs",
+                  [&] { return motion_->estimated_dofs(); });
+  if (dofs_.empty() || !std::is_sorted(dofs_.begin(), dofs_.end()) || dofs_.front() < 0 || dofs_.back() > 5)
+    throw PluginError(config_.motion.instance + " (plugin '" + config_.motion.plugin +
+                      "'): estimated_dofs must be ascending pose indices in 0..5");
+  robot_idx_.resize(dofs_.size());
+  std::iota(robot_idx_.begin(), robot_idx_.end(), 0);
+
+  x_r_ = guarded(config_.source.instance, *source_lib_, "initial_pose", [&] { return source_->initial_pose(); });
+  if (!config_.initial_pose.isZero()) x_r_ = config_.initial_pose;
+  const int k = static_cast<int>(dofs_.size());
+  Eigen::MatrixXd P0 = Eigen::MatrixXd::Zero(k, k);
+  for (int i = 0; i < k; ++i) P0(i, i) = config_.initial_sigma[dofs_[i]] * config_.initial_sigma[dofs_[i]];
+  guarded(config_.estimator.instance, *estimator_lib_, "reset", [&] { estimator_->reset(P0); });
+}
+
+Slam::~Slam() {
+  // Features were created by plugins: drop them before the types and libraries.
+  features_.clear();
+}
+
+std::size_t Slam::size_hint() const {
+  const std::size_t hint = source_->size_hint();
+  if (config_.max_steps > 0) {
+    const auto cap = static_cast<std::size_t>(config_.max_steps);
+    return hint == 0 ? cap : std::min(hint, cap);
+  }
+  return hint;
+}
+
+Eigen::MatrixXd Slam::true_landmarks() const { return source_->true_landmarks(); }
+
+Eigen::MatrixXd Slam::robot_covariance() const { return estimator_->marginal(robot_idx_); }
+
+Eigen::MatrixXd Slam::feature_covariance(const MapFeature& f) const {
+  if (f.state_idx.empty()) return {};
+  return estimator_->marginal(f.state_idx);
+}
+
+bool Slam::step() {
+  if (config_.max_steps > 0 && step_ >= config_.max_steps) return false;
+  DataStep data;
+  auto t0 = Clock::now();
+  const bool more = guarded(config_.source.instance, *source_lib_, "next", [&] { return source_->next(data); });
+  stats_.seconds_source += seconds_since(t0);
+  if (!more) return false;
+  ++step_;
+  ++stats_.steps;
+
+  t0 = Clock::now();
+  predict(data);
+  stats_.seconds_predict += seconds_since(t0);
+
+  std::vector<ReadingWork> work;
+  for (const SensorReading& reading : data.readings) process_reading(reading, work);
+
+  t0 = Clock::now();
+  add_dense_information(work);
+  stats_.seconds_dense += seconds_since(t0);
+
+  t0 = Clock::now();
+  std::vector<int> touched;
+  for (const ReadingWork& w : work)
+    for (const Match& m : w.matches) touched.push_back(m.feature);
+  for (std::size_t i = 0; i < features_.size(); ++i)
+    if (features_[i].created_step == step_) touched.push_back(static_cast<int>(i));
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  extend(touched);
+  prune_tentative();
+  stats_.seconds_extend += seconds_since(t0);
+
+  record(data);
+  return true;
+}
+
+// ---- Phase 1: predict ------------------------------------------------------
+
+void Slam::predict(const DataStep& data) {
+  const double dt = started_ ? data.t - t_ : 0.0;
+  started_ = true;
+  t_ = data.t;
+  if (data.odometry.size() == 0) return;
+  require_finite(data.odometry, "odometry increment", config_.source.instance, *source_lib_);
+  const MotionPrediction pred = guarded(config_.motion.instance, *motion_lib_, "predict",
+                                        [&] { return motion_->predict(x_r_, data.odometry, dt); });
+  const int k = static_cast<int>(dofs_.size());
+  if (pred.J_rr.rows() != k || pred.J_rr.cols() != k || pred.J_rd.rows() != k ||
+      pred.J_rd.cols() != pred.C_d.rows() || pred.C_d.rows() != pred.C_d.cols())
+    throw PluginError(config_.motion.instance + " (plugin '" + config_.motion.plugin +
+                      "'): predict returned matrices of inconsistent sizes");
+  require_finite(pred.pose, "predicted pose", config_.motion.instance, *motion_lib_);
+  require_finite(pred.J_rr, "J_rr", config_.motion.instance, *motion_lib_);
+  require_finite(pred.J_rd, "J_rd", config_.motion.instance, *motion_lib_);
+  require_finite(pred.C_d, "C_d", config_.motion.instance, *motion_lib_);
+
+  const Pose6 delta = pose_difference(pred.pose, x_r_);
+  path_distance_ += delta.head<3>().norm() + kRotationWeightMetresPerRadian * delta.tail<3>().norm();
+  x_r_ = pred.pose;
+  const Eigen::MatrixXd Q = pred.J_rd * pred.C_d * pred.J_rd.transpose();  // eq. 26
+  guarded(config_.estimator.instance, *estimator_lib_, "predict", [&] { estimator_->predict(pred.J_rr, Q); });
+}
+
+SensorView Slam::sensor_view(int sensor_index, double t) const {
+  SensorView view;
+  view.t = t;
+  view.sensor = sensor_index;
+  Mat6 J_sr;
+  view.x_ms = compound(x_r_, sensors_[sensor_index].config.mount, &J_sr);  // eq. 17
+  const Eigen::MatrixXd J = columns(J_sr, dofs_);
+  view.C_ms = J * estimator_->marginal(robot_idx_) * J.transpose();
+  view.path_distance = path_distance_;
+  return view;
+}
+
+void Slam::process_reading(const SensorReading& reading, std::vector<ReadingWork>& work) {
+  ++stats_.readings;
+  int sensor_index = -1;
+  for (std::size_t i = 0; i < sensors_.size(); ++i)
+    if (sensors_[i].config.channel == reading.channel) sensor_index = static_cast<int>(i);
+  if (sensor_index < 0) {
+    if (stats_.unknown_channel_readings++ == 0)
+      log_->warn("reading on channel '", reading.channel,
+                 "' has no sensor in the configuration; such readings are skipped (counted in the summary)");
+    return;
+  }
+  const SensorSlot& sensor = sensors_[sensor_index];
+  ReadingWork w;
+  w.sensor = sensor_index;
+  w.t = reading.t;
+  auto t0 = Clock::now();
+  guarded(sensor.config.extractor.instance, *sensor.library, "extract",
+          [&] { sensor.extractor->extract(reading, w.measurements); });
+  for (const Measurement& m : w.measurements) {
+    require_finite(m.v, "measurement vector", sensor.config.extractor.instance, *sensor.library);
+    require_finite(m.C_v, "measurement covariance", sensor.config.extractor.instance, *sensor.library);
+  }
+  stats_.measurements += static_cast<std::int64_t>(w.measurements.size());
+  associate(sensor, sensor_index, w.measurements, w);
+  stats_.seconds_associate += seconds_since(t0);
+
+  t0 = Clock::now();
+  update(w.matches);
+  stats_.seconds_update += seconds_since(t0);
+  work.push_back(std::move(w));
+}
+
+// Association by Mahalanobis gating (ICRA §IV, "Prediction"). For each
+// feature the sensor feeds, the state part of the innovation covariance is
+// computed once per reading in sensor-frame coordinates,
+//   M = A P Aᵀ + J_of Σ_gate J_ofᵀ,  A = (J_os J_sr  J_of B̃)   (eqs. 19–21),
+// and each measurement then costs only S = J_ηo M J_ηoᵀ + J_ηv C_v J_ηvᵀ.
+void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
+                     ReadingWork& work) {
+  const AssociationConfig& ac = config_.association;
+  auto threshold = [](std::vector<double>& cache, double p, int m) {
+    if (static_cast<int>(cache.size()) <= m) cache.resize(static_cast<std::size_t>(m) + 1, -1.0);
+    if (cache[m] < 0.0) cache[m] = chi2_quantile(p, m);
+    return cache[m];
+  };
+
+  Mat6 J_sr;
+  const Pose6 x_ms = compound(x_r_, sensor.config.mount, &J_sr);  // eq. 17
+  const Eigen::MatrixXd J_sr_dofs = columns(J_sr, dofs_);
+  const int k = static_cast<int>(dofs_.size());
+
+  std::vector<Candidate> candidates;
+  // Per measurement: min over features of d² / (new-feature threshold).
+  std::vector<double> closest(meas.size(), std::numeric_limits<double>::infinity());
+  for (std::size_t fi = 0; fi < features_.size(); ++fi) {
+    const MapFeature& mf = features_[fi];
+    if (std::find(sensor.feeds.begin(), sensor.feeds.end(), mf.type) == sensor.feeds.end()) continue;
+    const FeatureTypeSlot& type = types_[mf.type];
+    const Feature& f = *mf.feature;
+    const CoordLayout& layout = f.layout();
+    Eigen::MatrixXd J_of, J_os;
+    const Eigen::VectorXd x_o = to_sensor_frame(layout, f.coords(), x_ms, &J_of, &J_os);  // eqs. 7–9, 18
+
+    const int dim = f.mspace_dim();
+    Eigen::MatrixXd A(layout.size(), k + dim);
+    A.leftCols(k) = J_os * J_sr_dofs;
+    std::vector<int> idx = robot_idx_;
+    if (dim > 0) {
+      const Eigen::MatrixXd Bd = guarded(type.instance, *type.library, "B_dual", [&] { return f.B_dual(); });
+      if (Bd.rows() != layout.size() || Bd.cols() != dim)
+        throw PluginError(type.instance + " (plugin '" + type.plugin + "'): B_dual is " +
+                          std::to_string(Bd.rows()) + "x" + std::to_string(Bd.cols()) + ", expected " +
+                          std::to_string(layout.size()) + "x" + std::to_string(dim));
+      require_finite(Bd, "B_dual", type.instance, *type.library);
+      A.rightCols(dim) = J_of * Bd;
+      idx.insert(idx.end(), mf.state_idx.begin(), mf.state_idx.end());
+    }
+    Eigen::MatrixXd M = A * estimator_->marginal(idx) * A.transpose();
+    const Eigen::MatrixXd gate_cov =
+        guarded(type.instance, *type.library, "gating_covariance", [&] { return f.gating_covariance(); });
+    if (gate_cov.size() > 0) M += J_of * gate_cov * J_of.transpose();
+
+    for (std::size_t mi = 0; mi < meas.size(); ++mi) {
+      Candidate c;
+      const bool ok = guarded(type.instance, *type.library, "innovation",
+                              [&] { return f.innovation(x_o, meas[mi], c.innovation); });
+      if (!ok) continue;
+      const Innovation& in = c.innovation;
+      const auto m = in.eta.size();
+      if (m == 0 || in.J_eta_o.rows() != m || in.J_eta_o.cols() != layout.size() || in.J_eta_v.rows() != m ||
+          in.J_eta_v.cols() != meas[mi].v.size())
+        throw PluginError(type.instance + " (plugin '" + type.plugin +
+                          "'): innovation returned Jacobians of the wrong size");
+      require_finite(in.eta, "innovation", type.instance, *type.library);
+      require_finite(in.J_eta_o, "J_eta_o", type.instance, *type.library);
+      require_finite(in.J_eta_v, "J_eta_v", type.instance, *type.library);
+      c.C_eta = in.J_eta_v * meas[mi].C_v * in.J_eta_v.transpose();
+      const Eigen::MatrixXd S = in.J_eta_o * M * in.J_eta_o.transpose() + c.C_eta;  // eq. 29
+      const Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
+      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0.0).all()) continue;
+      c.d2 = in.eta.dot(ldlt.solve(in.eta));
+      const int mi_dim = static_cast<int>(m);
+      closest[mi] = std::min(closest[mi], c.d2 / threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
+      if (c.d2 > threshold(gate_chi2_, ac.gate_probability, mi_dim)) continue;
+      c.measurement = static_cast<int>(mi);
+      c.feature = static_cast<int>(fi);
+      c.J_state = in.J_eta_o * A;  // eq. 30: J_ηo (J_or  J_of B̃)
+      candidates.push_back(std::move(c));
+    }
+  }
+
+  // Greedy nearest neighbour: smallest distance first, each measurement and
+  // each feature used at most once per reading.
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& a, const Candidate& b) { return a.d2 < b.d2; });
+  std::vector<bool> meas_used(meas.size(), false);
+  std::vector<bool> feature_used(features_.size(), false);
+  for (Candidate& c : candidates) {
+    if (meas_used[c.measurement] || feature_used[c.feature]) continue;
+    meas_used[c.measurement] = true;
+    feature_used[c.feature] = true;
+    Match match;
+    match.feature = c.feature;
+    match.sensor = sensor_index;
+    match.measurement = c.measurement;
+    match.candidate = std::move(c);
+    work.matches.push_back(std::move(match));
+  }
+  stats_.matched += static_cast<std::int64_t>(work.matches.size());
+
+  // An unmatched measurement starts a new feature only when it lies beyond
+  // the (wider) new-feature threshold of every feature: ambiguous
+  // measurements create nothing.
+  work.may_create.assign(meas.size(), false);
+  for (std::size_t mi = 0; mi < meas.size(); ++mi) work.may_create[mi] = !meas_used[mi] && closest[mi] > 1.0;
+}
+
+// ---- Phase 2: update -------------------------------------------------------
+
+void Slam::update(std::vector<Match>& matches) {
+  std::vector<LinearizedObservation> obs;
+  for (const Match& match : matches) {
+    const MapFeature& mf = features_[match.feature];
+    if (mf.feature->mspace_dim() == 0) continue;  // tentative: dense information only
+    const Candidate& c = match.candidate;
+    LinearizedObservation o;
+    o.eta = c.innovation.eta;
+    o.C_eta = c.C_eta;
+    o.idx = robot_idx_;
+    o.idx.insert(o.idx.end(), mf.state_idx.begin(), mf.state_idx.end());
+    o.J = c.J_state;
+    obs.push_back(std::move(o));
+  }
+  if (obs.empty()) return;
+  stats_.updates += static_cast<std::int64_t>(obs.size());
+  const Eigen::VectorXd dx =
+      guarded(config_.estimator.instance, *estimator_lib_, "update", [&] { return estimator_->update(obs); });
+  require_finite(dx, "state perturbation", config_.estimator.instance, *estimator_lib_);
+
+  for (std::size_t i = 0; i < dofs_.size(); ++i) x_r_[dofs_[i]] += dx[static_cast<Eigen::Index>(i)];
+  for (int a = kTheta; a <= kPsi; ++a) x_r_[a] = wrap_angle(x_r_[a]);
+  for (MapFeature& mf : features_) {  // eq. 24: x_f += B̃ δx_p
+    if (mf.state_idx.empty()) continue;
+    Eigen::VectorXd dx_p(static_cast<Eigen::Index>(mf.state_idx.size()));
+    for (std::size_t j = 0; j < mf.state_idx.size(); ++j) dx_p[static_cast<Eigen::Index>(j)] = dx[mf.state_idx[j]];
+    const FeatureTypeSlot& type = types_[mf.type];
+    guarded(type.instance, *type.library, "apply_perturbation", [&] { mf.feature->apply_perturbation(dx_p); });
+  }
+}
+
+// ---- Phase 3: add dense information ----------------------------------------
+
+void Slam::add_dense_information(std::vector<ReadingWork>& work) {
+  for (ReadingWork& w : work) {
+    const SensorView view = sensor_view(w.sensor, w.t);  // after the update
+    for (const Match& match : w.matches) {
+      MapFeature& mf = features_[match.feature];
+      const FeatureTypeSlot& type = types_[mf.type];
+      guarded(type.instance, *type.library, "add_dense_information",
+              [&] { mf.feature->add_dense_information(w.measurements[match.measurement], view); });
+      mf.last_seen_step = step_;
+      mf.last_sensor = w.sensor;
+      mf.last_seen_t = w.t;
+      ++mf.times_matched;
+    }
+    const SensorSlot& sensor = sensors_[w.sensor];
+    for (std::size_t mi = 0; mi < w.measurements.size(); ++mi) {
+      if (!w.may_create[mi]) continue;
+      const Measurement& m = w.measurements[mi];
+      for (int type_index : sensor.feeds) {  // the first fed type that accepts it
+        const FeatureTypeSlot& type = types_[type_index];
+        std::unique_ptr<Feature> created =
+            guarded(type.instance, *type.library, "create", [&] { return type.type->create(m, view); });
+        if (!created) continue;
+        MapFeature mf;
+        mf.id = next_feature_id_++;
+        mf.type = type_index;
+        auto library = type.library;
+        mf.feature = std::shared_ptr<Feature>(created.release(), [library](Feature* p) { delete p; });
+        mf.created_step = step_;
+        mf.last_seen_step = step_;
+        mf.last_sensor = w.sensor;
+        mf.last_seen_t = w.t;
+        guarded(type.instance, *type.library, "add_dense_information",
+                [&] { mf.feature->add_dense_information(m, view); });
+        if (mf.feature->mspace_dim() != 0)
+          throw PluginError(type.instance + " (plugin '" + type.plugin +
+                            "'): create() must return a feature of M-space dimension 0");
+        features_.push_back(std::move(mf));
+        ++stats_.created;
+        break;
+      }
+    }
+  }
+}
+
+// ---- Phase 4: extend -------------------------------------------------------
+
+void Slam::extend(const std::vector<int>& touched) {
+  for (int fi : touched) {
+    MapFeature& mf = features_[fi];
+    const FeatureTypeSlot& type = types_[mf.type];
+    const int old_dim = mf.feature->mspace_dim();
+    std::optional<Extension> ext;
+    // Touched features were observed in this step, so the current pose of
+    // the sensor that saw them last is the view of their newest evidence.
+    const SensorView view = sensor_view(mf.last_sensor, mf.last_seen_t);
+    ext = guarded(type.instance, *type.library, "extend", [&] { return mf.feature->extend(view); });
+    if (!ext) continue;
+    const std::string who = type.instance + " (plugin '" + type.plugin + "')";
+    const int n = ext->new_dims;
+    if (n <= 0 || mf.feature->mspace_dim() != old_dim + n)
+      throw PluginError(who + ": extend() reported " + std::to_string(n) + " new dimensions but the feature went from " +
+                        std::to_string(old_dim) + " to " + std::to_string(mf.feature->mspace_dim()));
+    if (ext->sensor < 0 || ext->sensor >= static_cast<int>(sensors_.size()))
+      throw PluginError(who + ": extend() names sensor " + std::to_string(ext->sensor) + ", which does not exist");
+    if (ext->C_new.rows() != n || ext->C_new.cols() != n ||
+        (ext->J_sensor.size() > 0 && (ext->J_sensor.rows() != n || ext->J_sensor.cols() != 6)) ||
+        (ext->J_own.size() > 0 && (ext->J_own.rows() != n || ext->J_own.cols() != old_dim)))
+      throw PluginError(who + ": extend() returned matrices of the wrong size");
+    require_finite(ext->C_new, "extension covariance", type.instance, *type.library);
+    require_finite(ext->J_sensor, "extension J_sensor", type.instance, *type.library);
+    require_finite(ext->J_own, "extension J_own", type.instance, *type.library);
+
+    // δx_new = J_sensor δx_ms + J_own δx_p,old + w with δx_ms = J_sr δx_r (eq. 20).
+    StateAugmentation aug;
+    aug.C_new = ext->C_new;
+    aug.J = Eigen::MatrixXd::Zero(n, 0);
+    if (ext->J_sensor.size() > 0) {
+      Mat6 J_sr;
+      compound(x_r_, sensors_[ext->sensor].config.mount, &J_sr);
+      aug.idx = robot_idx_;
+      aug.J = ext->J_sensor * columns(J_sr, dofs_);
+    }
+    if (ext->J_own.size() > 0) {
+      aug.idx.insert(aug.idx.end(), mf.state_idx.begin(), mf.state_idx.end());
+      Eigen::MatrixXd J(n, aug.J.cols() + old_dim);
+      J << aug.J, ext->J_own;
+      aug.J = J;
+    }
+    const int first =
+        guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
+    for (int i = 0; i < n; ++i) mf.state_idx.push_back(first + i);
+    ++stats_.extended;
+  }
+}
+
+// Tentative features (dimension 0, never in the estimator) that are not seen
+// again within tentative_max_age steps were most likely clutter.
+void Slam::prune_tentative() {
+  const std::int64_t max_age = config_.association.tentative_max_age;
+  const auto stale = [&](const MapFeature& mf) {
+    return mf.feature->mspace_dim() == 0 && step_ - mf.last_seen_step > max_age;
+  };
+  const auto before = features_.size();
+  features_.erase(std::remove_if(features_.begin(), features_.end(), stale), features_.end());
+  stats_.pruned += static_cast<std::int64_t>(before - features_.size());
+}
+
+void Slam::record(const DataStep& data) {
+  trajectory_.push_back({data.t, x_r_});
+  if (!data.ground_truth) return;
+  ground_truth_.push_back({data.t, *data.ground_truth});
+  const Pose6 err = pose_difference(x_r_, *data.ground_truth);
+  Eigen::VectorXd e(static_cast<Eigen::Index>(dofs_.size()));
+  for (std::size_t i = 0; i < dofs_.size(); ++i) e[static_cast<Eigen::Index>(i)] = err[dofs_[i]];
+  const Eigen::MatrixXd P = robot_covariance();
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(P);
+  if (ldlt.info() == Eigen::Success && (ldlt.vectorD().array() > 0.0).all())
+    stats_.nees.push_back(e.dot(ldlt.solve(e)));
+}
+
+}  // namespace mspace::kernel

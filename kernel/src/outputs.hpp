@@ -1,0 +1,45 @@
+// outputs.hpp — what a run writes: trajectory (TUM), map (YAML), run summary
+// (YAML + a one-screen text), and a picture (PNG, picture.cpp).
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "evaluation.hpp"
+
+namespace mspace::kernel {
+
+class Slam;
+
+/// Everything the summary reports, computed once at the end of a run.
+struct RunSummary {
+  std::string run_name;
+  std::string config_file;
+  long long steps = 0;
+  double data_seconds = 0.0;  ///< time span covered by the data
+  double wall_seconds = 0.0;  ///< wall-clock time of the whole run
+  int state_dimension = 0;
+  /// feature-type instance → M-space dimension → count
+  std::map<std::string, std::map<int, int>> features_by_dim;
+  std::optional<TrajectoryErrors> errors;  ///< when the source gave ground truth
+  double mean_nees = 0.0;
+  int nees_dof = 0;
+};
+
+RunSummary summarize(const Slam& slam, double wall_seconds);
+
+/// `t x y z qx qy qz qw` per line (TUM RGB-D benchmark format).
+void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses);
+/// Every feature: id, type instance, plugin, layout, coordinates, M-space
+/// dimension and its covariance block.
+void write_map_yaml(const std::filesystem::path& file, const Slam& slam);
+void write_summary_yaml(const std::filesystem::path& file, const RunSummary& summary, const Slam& slam);
+/// The one-screen summary printed at the end of `mspace run`.
+std::string format_summary(const RunSummary& summary, const Slam& slam);
+/// Top view of the map, the estimated and the true trajectory (OpenCV).
+void write_picture(const std::filesystem::path& file, const Slam& slam, int size_px);
+
+}  // namespace mspace::kernel

@@ -1,0 +1,156 @@
+// slam.hpp — the four phases of M-space SLAM (ICRA §IV), sequenced in one place.
+//
+//   1. predict  — motion model → estimator (eqs. 25–27); sensor poses (eq. 17);
+//                 extract measurements; associate by Mahalanobis gating.
+//   2. update   — innovations of matched features with M-space dim > 0,
+//                 J_η,state = J_ηo (J_or  J_of B̃) (eq. 30) → estimator (28–32)
+//                 → robot pose and features (eq. 24).
+//   3. add dense information — matched features store their evidence;
+//                 unmatched measurements start tentative features (dim 0).
+//   4. extend   — features add M-space dimensions; the estimator adds rows.
+//
+// The kernel only talks to the SDK interfaces; it never names a feature type.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "config.hpp"
+#include "evaluation.hpp"
+#include "mspace/estimator.hpp"
+#include "mspace/extractor.hpp"
+#include "mspace/feature.hpp"
+#include "mspace/motion_model.hpp"
+#include "mspace/source.hpp"
+#include "plugin_registry.hpp"
+
+namespace mspace::kernel {
+
+/// One feature in the map, as the kernel tracks it.
+struct MapFeature {
+  int id = 0;
+  int type = 0;                      ///< index into Slam::feature_types()
+  std::shared_ptr<Feature> feature;  ///< keeps its plugin library loaded
+  std::vector<int> state_idx;        ///< estimator indices of its M-space dims
+  std::int64_t created_step = 0;
+  std::int64_t last_seen_step = 0;
+  int last_sensor = 0;      ///< sensor of the newest evidence
+  double last_seen_t = 0.0;  ///< time stamp of the newest evidence
+  int times_matched = 0;
+};
+
+/// A feature-type instance from the YAML (`features: {name: {plugin: …}}`).
+struct FeatureTypeSlot {
+  std::string instance;
+  std::string plugin;
+  std::shared_ptr<const LoadedPlugin> library;
+  std::shared_ptr<FeatureType> type;
+  std::shared_ptr<Logger> logger;
+};
+
+struct SensorSlot {
+  SensorConfig config;
+  std::shared_ptr<const LoadedPlugin> library;
+  std::shared_ptr<Extractor> extractor;
+  std::shared_ptr<Logger> logger;
+  std::vector<int> feeds;  ///< feature-type indices this sensor's measurements may match
+};
+
+
+/// Counters and timings of a run (summary and progress).
+struct RunStats {
+  std::int64_t steps = 0;
+  std::int64_t readings = 0;
+  std::int64_t measurements = 0;
+  std::int64_t matched = 0;
+  std::int64_t updates = 0;  ///< matched measurements used in an estimator update
+  std::int64_t created = 0;
+  std::int64_t extended = 0;
+  std::int64_t pruned = 0;
+  std::int64_t unknown_channel_readings = 0;
+  double seconds_predict = 0.0;
+  double seconds_associate = 0.0;
+  double seconds_update = 0.0;
+  double seconds_dense = 0.0;
+  double seconds_extend = 0.0;
+  double seconds_source = 0.0;
+  /// Robot NEES at every step with ground truth (dims = estimated dofs).
+  std::vector<double> nees;
+};
+
+class Slam {
+ public:
+  /// Creates every plugin instance of the configuration.
+  Slam(const RunConfig& config, PluginRegistry& registry);
+  ~Slam();
+  Slam(const Slam&) = delete;
+  Slam& operator=(const Slam&) = delete;
+
+  /// Reads and processes the next data step; false at the end of the data or
+  /// after run.max_steps steps.
+  bool step();
+
+  const RunConfig& config() const { return config_; }
+  const Pose6& pose() const { return x_r_; }
+  /// Covariance of the robot's estimated pose coordinates.
+  Eigen::MatrixXd robot_covariance() const;
+  const std::vector<int>& robot_dofs() const { return dofs_; }
+  const std::vector<StampedPose>& trajectory() const { return trajectory_; }
+  const std::vector<StampedPose>& ground_truth() const { return ground_truth_; }
+  const std::vector<MapFeature>& features() const { return features_; }
+  const std::vector<FeatureTypeSlot>& feature_types() const { return types_; }
+  /// Covariance of a feature's M-space perturbations (dim × dim).
+  Eigen::MatrixXd feature_covariance(const MapFeature& f) const;
+  const RunStats& stats() const { return stats_; }
+  std::size_t size_hint() const;
+  Eigen::MatrixXd true_landmarks() const;
+
+ private:
+  struct Candidate;
+  struct Match;
+  struct ReadingWork;
+
+  void predict(const DataStep& data);
+  void process_reading(const SensorReading& reading, std::vector<ReadingWork>& work);
+  void associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
+                 ReadingWork& work);
+  void update(std::vector<Match>& matches);
+  void add_dense_information(std::vector<ReadingWork>& work);
+  void extend(const std::vector<int>& touched);
+  void prune_tentative();
+  void record(const DataStep& data);
+  SensorView sensor_view(int sensor_index, double t) const;
+
+  RunConfig config_;
+  std::shared_ptr<Logger> log_;
+  std::shared_ptr<const LoadedPlugin> source_lib_, motion_lib_, estimator_lib_;
+  std::shared_ptr<DataSource> source_;
+  std::shared_ptr<MotionModel> motion_;
+  std::shared_ptr<Estimator> estimator_;
+  std::vector<std::shared_ptr<Logger>> plugin_loggers_;
+  std::vector<FeatureTypeSlot> types_;
+  std::vector<SensorSlot> sensors_;
+  std::vector<MapFeature> features_;
+
+  std::vector<int> dofs_;     ///< robot pose coordinates in the state
+  std::vector<int> robot_idx_;  ///< 0..k−1
+  Pose6 x_r_ = Pose6::Zero();
+  double t_ = 0.0;
+  bool started_ = false;
+  double path_distance_ = 0.0;
+  std::int64_t step_ = 0;
+  int next_feature_id_ = 1;
+  double gate_cache_p_ = -1.0;
+  std::vector<double> gate_chi2_;      ///< by innovation dimension
+  std::vector<double> new_feature_chi2_;
+  std::vector<StampedPose> trajectory_;
+  std::vector<StampedPose> ground_truth_;
+  RunStats stats_;
+};
+
+}  // namespace mspace::kernel
