@@ -325,6 +325,9 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
       c.d2 = in.eta.dot(ldlt.solve(in.eta));
       const int mi_dim = static_cast<int>(m);
       closest[mi] = std::min(closest[mi], c.d2 / threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
+      if (log_->enabled(LogLevel::Trace))
+        log_->trace("step ", step_, ": measurement ", mi, " vs #", mf.id, " (dim ", dim, "): d2 ", c.d2, " eta ",
+                    in.eta.transpose());
       if (c.d2 > threshold(gate_chi2_, ac.gate_probability, mi_dim)) continue;
       c.measurement = static_cast<int>(mi);
       c.feature = static_cast<int>(fi);
@@ -333,10 +336,15 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
     }
   }
 
-  // Greedy nearest neighbour: smallest distance first, each measurement and
-  // each feature used at most once per reading.
-  std::sort(candidates.begin(), candidates.end(),
-            [](const Candidate& a, const Candidate& b) { return a.d2 < b.d2; });
+  // Greedy nearest neighbour, each measurement and each feature used at most
+  // once per reading: features in the estimator first, then tentative ones
+  // (which are often clutter and must not take a measurement from a feature
+  // they happen to lie close to), smallest distance first within each group.
+  const auto tentative = [&](const Candidate& c) { return features_[c.feature].feature->mspace_dim() == 0; };
+  std::sort(candidates.begin(), candidates.end(), [&](const Candidate& a, const Candidate& b) {
+    const bool ta = tentative(a), tb = tentative(b);
+    return ta != tb ? tb : a.d2 < b.d2;
+  });
   std::vector<bool> meas_used(meas.size(), false);
   std::vector<bool> feature_used(features_.size(), false);
   for (Candidate& c : candidates) {
@@ -430,6 +438,9 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
         if (mf.feature->mspace_dim() != 0)
           throw PluginError(type.instance + " (plugin '" + type.plugin +
                             "'): create() must return a feature of M-space dimension 0");
+        if (log_->enabled(LogLevel::Debug))
+          log_->debug("step ", step_, ": new tentative ", type.instance, " #", mf.id, " at ",
+                      mf.feature->coords().transpose());
         features_.push_back(std::move(mf));
         ++stats_.created;
         break;

@@ -1,0 +1,238 @@
+// End-to-end tests of the kernel on the built-in simulated world
+// (config/sim_points.yaml): accuracy against ground truth, consistency of the
+// filter over many seeds, the outputs of a run, and a plugin returning NaN.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <yaml-cpp/yaml.h>
+
+#include "chi2.hpp"
+#include "config.hpp"
+#include "logging.hpp"
+#include "plugin_registry.hpp"
+#include "runner.hpp"
+#include "slam.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+
+const std::filesystem::path kConfig = std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "sim_points.yaml";
+
+class SimRun : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    registry_.add_search_dir(MSPACE_PLUGIN_DIR);
+    registry_.add_search_dir(MSPACE_RUN_FIXTURE_DIR);
+    set_log_level(LogLevel::Warn);
+    out_ = std::filesystem::path(MSPACE_BINARY_DIR) / "test-output" /
+           ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    std::filesystem::remove_all(out_);
+  }
+
+  RunConfig config() {
+    RunConfig c = load_config(kConfig, registry_);
+    c.output.dir = out_.string();
+    return c;
+  }
+
+  RunResult run(const RunConfig& c, bool outputs = false) {
+    Slam slam(c, registry_);
+    RunOptions options;
+    options.progress = false;
+    options.write_outputs = outputs;
+    return run_to_end(slam, options);
+  }
+
+  PluginRegistry registry_;
+  std::filesystem::path out_;
+};
+
+// Dead reckoning on the same data: the sensor listens to a channel no
+// reading uses, so every step is a pure prediction.
+RunConfig without_sensor(RunConfig c) {
+  for (SensorConfig& s : c.sensors) s.channel = "unused";
+  return c;
+}
+
+// The default run. Bounds, from the simulated noise: a landmark is measured
+// with σ_range = 5 cm and σ_bearing = 0.5° (≤ 7 cm at the 8 m range), about
+// 4.5 landmarks per scan at 10 Hz, so the robot is held to a few cm relative
+// to the landmarks it sees; what remains is the map's error relative to the
+// start, which grows with the distance from the start but is pulled back at
+// every pass through the origin (the route crosses it 8 times). The filter's
+// own robot σ stays below ~5 cm on this route. We allow 0.15 m ATE RMSE
+// (3 × 5 cm) and a final error of 0.15 m / 0.5°. Dead reckoning drifts by
+// metres with the same odometry noise (1.5°/m heading noise here), so SLAM must
+// also beat it by at least 10×.
+TEST_F(SimRun, DefaultRunMeetsAccuracyBoundsAndBeatsDeadReckoning) {
+  const RunResult slam = run(config(), /*outputs=*/true);
+  ASSERT_TRUE(slam.summary.errors.has_value());
+  const TrajectoryErrors& e = *slam.summary.errors;
+  EXPECT_EQ(e.matched, static_cast<std::size_t>(slam.summary.steps));
+  EXPECT_LT(e.ate_rmse, 0.15);
+  EXPECT_LT(e.final_translation, 0.15);
+  EXPECT_LT(e.final_heading * 180.0 / std::numbers::pi, 0.5);
+
+  const RunResult odo = run(without_sensor(config()));
+  ASSERT_TRUE(odo.summary.errors.has_value());
+  EXPECT_GT(odo.summary.errors->ate_rmse, 10.0 * e.ate_rmse)
+      << "dead reckoning ATE " << odo.summary.errors->ate_rmse << " m, SLAM " << e.ate_rmse << " m";
+}
+
+// Every landmark the robot passed is in the map once, where it truly is.
+TEST_F(SimRun, MapFeaturesMatchTrueLandmarks) {
+  const RunConfig c = config();
+  Slam slam(c, registry_);
+  while (slam.step()) {
+  }
+  const Eigen::MatrixXd truth = slam.true_landmarks();
+  ASSERT_GT(truth.cols(), 0);
+  std::vector<int> hits(static_cast<std::size_t>(truth.cols()), 0);
+  int in_map = 0;
+  double worst = 0.0;
+  for (const MapFeature& f : slam.features()) {
+    if (f.feature->mspace_dim() == 0) continue;
+    ++in_map;
+    Eigen::Index nearest = 0;
+    const double d = (truth.colwise() - f.feature->coords()).colwise().norm().minCoeff(&nearest);
+    worst = std::max(worst, d);
+    ++hits[static_cast<std::size_t>(nearest)];
+  }
+  // 3σ of a landmark mapped from several 5 cm / 0.5° observations plus the
+  // robot's own few-cm error: 0.25 m.
+  EXPECT_LT(worst, 0.25);
+  const auto duplicates = std::count_if(hits.begin(), hits.end(), [](int h) { return h > 1; });
+  EXPECT_LE(duplicates, 2) << in_map << " features for " << truth.cols() << " landmarks";
+  EXPECT_GE(in_map, 100);
+}
+
+// Consistency: the robot NEES averaged over N = 20 seeds. If the filter is
+// consistent, N·ε̄ ~ χ²(3N) at every step, so ε̄ lies in the two-sided 95 %
+// band [χ²₆₀(0.025)/20, χ²₆₀(0.975)/20] = [2.02, 4.16] at ~95 % of the steps.
+// A short run (the first 1200 steps, 120 s, with two passes through the
+// origin) keeps the EKF's linearisation errors small.
+TEST_F(SimRun, RobotNeesOverTwentySeedsIsInsideTheChiSquareBand) {
+  constexpr int kSeeds = 20;
+  constexpr int kSteps = 1200;
+  const int dof = 3;
+  const double lo = chi2_quantile(0.025, dof * kSeeds) / kSeeds;
+  const double hi = chi2_quantile(0.975, dof * kSeeds) / kSeeds;
+  ASSERT_NEAR(lo, 2.02, 0.01);
+  ASSERT_NEAR(hi, 4.16, 0.01);
+
+  std::vector<double> mean_nees(kSteps, 0.0);
+  for (int seed = 1; seed <= kSeeds; ++seed) {
+    RunConfig c = config();
+    c.max_steps = kSteps;
+    c.source.params.set("seed", static_cast<std::int64_t>(seed));
+    Slam slam(c, registry_);
+    while (slam.step()) {
+    }
+    // No NEES at the first step: the robot starts exactly known (zero covariance).
+    const std::vector<double>& nees = slam.stats().nees;
+    ASSERT_EQ(nees.size(), static_cast<std::size_t>(kSteps - 1));
+    for (int k = 1; k < kSteps; ++k) mean_nees[k] += nees[k - 1] / kSeeds;
+  }
+  // Skip the first second, while the covariance grows from zero.
+  double sum = 0.0;
+  int inside = 0, counted = 0;
+  for (int k = 10; k < kSteps; ++k, ++counted) {
+    sum += mean_nees[k];
+    inside += (mean_nees[k] >= lo && mean_nees[k] <= hi) ? 1 : 0;
+  }
+  const double overall = sum / counted;
+  const double fraction = static_cast<double>(inside) / counted;
+  std::cout << "robot NEES averaged over " << kSeeds << " seeds: mean " << overall << ", inside [" << lo << ", "
+            << hi << "] at " << 100.0 * fraction << " % of steps\n";
+  EXPECT_GE(overall, lo);
+  EXPECT_LE(overall, hi);
+  // Successive steps are strongly correlated, so the fraction is noisier than
+  // a binomial with 1190 trials; 85 % leaves room for that, not for a
+  // systematically over- or under-confident filter.
+  EXPECT_GE(fraction, 0.85) << "mean NEES over seeds and steps " << overall;
+}
+
+std::vector<std::string> lines_of(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty() && line[0] != '#') lines.push_back(line);
+  return lines;
+}
+
+TEST_F(SimRun, WritesTrajectoryMapSummaryAndPicture) {
+  RunConfig c = config();
+  c.max_steps = 800;
+  const RunResult r = run(c, /*outputs=*/true);
+
+  const auto traj = lines_of(out_ / "trajectory.tum");
+  ASSERT_EQ(traj.size(), 800u);
+  for (const std::string& line : {traj.front(), traj.back()}) {
+    std::istringstream is(line);
+    std::vector<double> v;
+    for (double x; is >> x;) v.push_back(x);
+    ASSERT_EQ(v.size(), 8u) << line;
+    EXPECT_NEAR(std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]), 1.0, 1e-6);
+  }
+  EXPECT_EQ(lines_of(out_ / "ground_truth.tum").size(), 800u);
+
+  const YAML::Node map = YAML::LoadFile((out_ / "map.yaml").string());
+  ASSERT_TRUE(map["features"].IsSequence());
+  int initialised = 0;
+  for (const YAML::Node& f : map["features"]) {
+    EXPECT_EQ(f["type"].as<std::string>(), "point");
+    EXPECT_EQ(f["coords"].size(), 3u);
+    const int dim = f["mspace_dim"].as<int>();
+    if (dim == 0) continue;
+    ++initialised;
+    ASSERT_EQ(f["covariance"].size(), static_cast<std::size_t>(dim));
+    EXPECT_GT(f["covariance"][0][0].as<double>(), 0.0);
+  }
+  EXPECT_GT(initialised, 10);
+
+  const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
+  EXPECT_EQ(summary["steps"].as<int>(), 800);
+  EXPECT_NEAR(summary["ground_truth"]["ate_rmse_m"].as<double>(), r.summary.errors->ate_rmse, 1e-6);
+  EXPECT_EQ(summary["features"]["point"]["dim3"].as<int>(), initialised);
+
+  std::ifstream png(out_ / "map.png", std::ios::binary);
+  char signature[8] = {};
+  png.read(signature, 8);
+  EXPECT_EQ(std::string(signature + 1, 3), "PNG");
+}
+
+// A plugin that hands back NaN stops the run with an error naming the
+// instance and the plugin, and the steps computed before are not lost.
+TEST_F(SimRun, NanFromAPluginIsAnErrorAndKeepsWhatWasComputed) {
+  RunConfig c = config();
+  c.sensors[0].extractor.plugin = "nan_extractor";
+  c.sensors[0].extractor.params = Params();
+  c.sensors[0].extractor.params.set("clean_readings", std::int64_t{50});
+  Slam slam(c, registry_);
+  RunOptions options;
+  options.progress = false;
+  try {
+    run_to_end(slam, options);
+    FAIL() << "expected a PluginError";
+  } catch (const PluginError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("laser"), std::string::npos) << what;
+    EXPECT_NE(what.find("nan_extractor"), std::string::npos) << what;
+    EXPECT_NE(what.find("NaN"), std::string::npos) << what;
+  }
+  EXPECT_EQ(lines_of(out_ / "trajectory.tum").size(), 50u);
+  EXPECT_TRUE(std::filesystem::exists(out_ / "summary.yaml"));
+}
+
+}  // namespace
