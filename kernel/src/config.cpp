@@ -631,3 +631,19 @@ std::string effective_config_yaml(const RunConfig& c) {
 }
 
 }  // namespace mspace::kernel
+
+namespace mspace::kernel {
+
+void apply_run_seed(RunConfig& config) {
+  if (!config.seed) return;
+  auto reseed = [&](InstanceConfig& inst) {
+    if (inst.params.has("seed")) inst.params.set("seed", *config.seed);
+  };
+  reseed(config.source);
+  reseed(config.motion);
+  reseed(config.estimator);
+  for (InstanceConfig& f : config.features) reseed(f);
+  for (SensorConfig& s : config.sensors) reseed(s.extractor);
+}
+
+}  // namespace mspace::kernel

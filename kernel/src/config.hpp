@@ -97,6 +97,10 @@ RunConfig parse_config(const std::string& text, const std::string& file_name_for
 
 /// The fully resolved configuration (every parameter with its effective value)
 /// as YAML text in the run-file layout; parse_config accepts it back.
+/// run.seed (or the CLI's --seed), when set, becomes the value of the `seed`
+/// parameter of every plugin instance that declares one.
+void apply_run_seed(RunConfig& config);
+
 std::string effective_config_yaml(const RunConfig& config);
 
 /// Expands ${VAR} and ${VAR:-default} (default used when VAR is unset or

@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -47,8 +48,8 @@ RunConfig load(const std::string& file, PluginRegistry& registry) {
   return load_config(file, registry);
 }
 
-int cmd_run(const std::string& file, const std::string& out, long long max_steps, bool quiet,
-            const CommonOptions& common) {
+int cmd_run(const std::string& file, const std::string& out, long long max_steps, std::optional<long long> seed,
+            bool quiet, const CommonOptions& common) {
   PluginRegistry registry;
   setup_registry(registry, common);
   RunConfig config = load(file, registry);
@@ -56,6 +57,8 @@ int cmd_run(const std::string& file, const std::string& out, long long max_steps
   set_log_level(parse_log_level(common.log_level.empty() ? config.log_level : common.log_level));
   if (!out.empty()) config.output.dir = out;
   if (max_steps > 0) config.max_steps = max_steps;
+  if (seed) config.seed = *seed;
+  apply_run_seed(config);
   kernel_log().info("configuration ", file.empty() ? default_config_name() : file, ":\n",
                     effective_config_yaml(config));
   Slam slam(config, registry);
@@ -103,7 +106,8 @@ int cmd_plugins(const CommonOptions& common) {
 int cmd_config(const std::string& file, const CommonOptions& common) {
   PluginRegistry registry;
   setup_registry(registry, common);
-  const RunConfig config = load(file, registry);
+  RunConfig config = load(file, registry);
+  apply_run_seed(config);
   std::cout << effective_config_yaml(config);
   return 0;
 }
@@ -119,10 +123,12 @@ int main(int argc, char** argv) {
   std::string run_file, out_dir;
   long long max_steps = 0;
   bool quiet = false;
+  std::optional<long long> seed;
   CLI::App* run = app.add_subcommand("run", "run SLAM as a YAML file describes (the built-in simulated world without one)");
   run->add_option("config", run_file, "YAML run configuration");
   run->add_option("--out", out_dir, "output folder (overrides output.dir)");
   run->add_option("--max-steps", max_steps, "stop after this many steps");
+  run->add_option("--seed", seed, "seed for every plugin with a `seed` parameter (overrides run.seed)");
   run->add_flag("--quiet", quiet, "no progress output");
   add_common(run, common);
 
@@ -136,7 +142,7 @@ int main(int argc, char** argv) {
 
   CLI11_PARSE(app, argc, argv);
   try {
-    if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, quiet, common);
+    if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, seed, quiet, common);
     if (plugins->parsed()) return cmd_plugins(common);
     if (config->parsed()) return cmd_config(config_file, common);
   } catch (const std::exception& e) {

@@ -28,6 +28,8 @@ void Progress::update(std::size_t done, const std::string& status) {
 
 void Progress::finish(std::size_t done, const std::string& status) {
   if (!enabled_) return;
+  // Without a terminal the last decile line may already say 100 %.
+  if (!tty_ && total_ > 0 && done >= total_ && last_decile_ == 10) return;
   draw(done, status, true);
 }
 
