@@ -10,6 +10,7 @@
 // (eq. 30), the estimator — is generic and lives in the SDK and kernel.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
@@ -42,6 +43,24 @@ struct Extension {
   Eigen::MatrixXd J_sensor;  ///< new_dims × 6 (may be zero-size: no correlation with the robot)
   Eigen::MatrixXd J_own;     ///< new_dims × old dim (may be zero-size)
   Eigen::MatrixXd C_new;     ///< new_dims × new_dims, symmetric positive definite
+};
+
+/// Everything needed to rebuild a feature (map files, conformance round trip).
+struct SavedFeature {
+  Eigen::VectorXd coords;  ///< x_f
+  int mspace_dim = 0;
+  Eigen::VectorXd extra;   ///< type-specific state (e.g. lengths at join time), may be empty
+};
+
+class Feature;
+
+/// A random valid configuration for the conformance suite (`mspace check`):
+/// a feature at a given M-space dimension, a sensor pose that sees it and a
+/// measurement consistent with it (innovation ≈ 0 up to noise).
+struct FeatureSample {
+  std::unique_ptr<Feature> feature;
+  Pose6 x_ms;
+  Measurement measurement;
 };
 
 class Feature {
@@ -78,6 +97,15 @@ class Feature {
   /// slide coordinates orthogonal to the M-space.
   virtual void add_dense_information(const Measurement& m, const SensorView& view) = 0;
 
+  /// Directions in x_f space (n × s, one per column) along which the
+  /// feature can move without changing any innovation at its current M-space
+  /// dimension — the symmetries outside the M-space (e.g. sliding unmeasured
+  /// wall end points along the wall). Zero columns: none declared.
+  virtual Eigen::MatrixXd symmetry_directions() const { return {}; }
+
+  /// The feature's state for map files; FeatureType::restore inverts it.
+  virtual SavedFeature save() const { return SavedFeature{x_, mdim_, {}}; }
+
   /// Phase 4: add M-space dimensions if the dense information supports it.
   /// The feature updates x_f and its dimension itself and returns what the
   /// estimator must add; std::nullopt when nothing changes.
@@ -94,12 +122,23 @@ class FeatureType : public PluginObject {
   virtual const CoordLayout& layout() const = 0;
   /// Largest M-space dimension a feature of this type can reach.
   virtual int max_mspace_dim() const = 0;
+  /// Every M-space dimension a feature can have, ascending, starting at 0
+  /// (e.g. {0, 3} for a point, {0, 2, 3, 4} for a wall).
+  virtual std::vector<int> reachable_dims() const { return {0, max_mspace_dim()}; }
   /// Measurement kinds this type accepts (for wiring checks).
   virtual std::vector<std::string> measurement_kinds() const = 0;
   /// A new tentative feature (M-space dimension 0) from an unmatched
   /// measurement; nullptr when the measurement cannot start a feature.
   /// The kernel calls add_dense_information(m, view) on it right after.
   virtual std::unique_ptr<Feature> create(const Measurement& m, const SensorView& view) = 0;
+
+  /// Conformance support: a random valid sample at M-space dimension `dim`,
+  /// drawn deterministically from `seed`; std::nullopt when `dim` is not
+  /// reachable. The default throws std::logic_error (the suite reports the
+  /// type as not checkable).
+  virtual std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const;
+  /// Rebuilds a feature from Feature::save(). The default throws std::logic_error.
+  virtual std::unique_ptr<Feature> restore(const SavedFeature& saved) const;
 };
 
 }  // namespace mspace

@@ -1,0 +1,15 @@
+#include "mspace/feature.hpp"
+
+#include <stdexcept>
+
+namespace mspace {
+
+std::optional<FeatureSample> FeatureType::sample(int, std::uint64_t) const {
+  throw std::logic_error("this feature type does not implement FeatureType::sample(), so it cannot be checked");
+}
+
+std::unique_ptr<Feature> FeatureType::restore(const SavedFeature&) const {
+  throw std::logic_error("this feature type does not implement FeatureType::restore()");
+}
+
+}  // namespace mspace
