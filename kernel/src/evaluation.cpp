@@ -34,20 +34,33 @@ Se2Alignment align_se2(const std::vector<Eigen::Vector2d>& est, const std::vecto
   return a;
 }
 
+std::optional<Pose6> interpolate(const std::vector<StampedPose>& trajectory, double t, double max_gap) {
+  if (trajectory.empty() || t < trajectory.front().t || t > trajectory.back().t) return std::nullopt;
+  const auto after = std::lower_bound(trajectory.begin(), trajectory.end(), t,
+                                      [](const StampedPose& p, double time) { return p.t < time; });
+  if (after->t == t) return after->pose;
+  const StampedPose& b = *after;
+  const StampedPose& a = *(after - 1);
+  if (b.t - a.t > max_gap) return std::nullopt;
+  const double s = (t - a.t) / (b.t - a.t);
+  const Pose6 delta = pose_difference(b.pose, a.pose);  // angles wrapped
+  Pose6 p = a.pose + s * delta;
+  for (int i = kTheta; i <= kPsi; ++i) p[i] = wrap_angle(p[i]);
+  return p;
+}
+
 TrajectoryErrors evaluate_trajectory(const std::vector<StampedPose>& estimate,
-                                     const std::vector<StampedPose>& reference, double max_dt) {
+                                     const std::vector<StampedPose>& reference, double max_gap) {
   TrajectoryErrors out;
-  if (estimate.empty() || reference.empty()) return out;
   std::vector<Eigen::Vector2d> est, ref;
-  const StampedPose* last_est = nullptr;
+  std::optional<Pose6> last_est;
   const StampedPose* last_ref = nullptr;
-  std::size_t j = 0;  // both sequences are in time order
   for (const StampedPose& r : reference) {
-    while (j + 1 < estimate.size() && std::abs(estimate[j + 1].t - r.t) <= std::abs(estimate[j].t - r.t)) ++j;
-    if (std::abs(estimate[j].t - r.t) > max_dt) continue;
-    est.emplace_back(estimate[j].pose[kX], estimate[j].pose[kY]);
+    const std::optional<Pose6> e = interpolate(estimate, r.t, max_gap);
+    if (!e) continue;
+    est.emplace_back((*e)[kX], (*e)[kY]);
     ref.emplace_back(r.pose[kX], r.pose[kY]);
-    last_est = &estimate[j];
+    last_est = e;
     last_ref = &r;
   }
   out.matched = est.size();
@@ -63,9 +76,9 @@ TrajectoryErrors evaluate_trajectory(const std::vector<StampedPose>& estimate,
   out.ate_max = *std::max_element(err.begin(), err.end());
   std::nth_element(err.begin(), err.begin() + static_cast<std::ptrdiff_t>(err.size() / 2), err.end());
   out.ate_median = err[err.size() / 2];
-  const Pose6 d = pose_difference(last_est->pose, last_ref->pose);
+  const Pose6 d = pose_difference(*last_est, last_ref->pose);
   out.final_translation = d.head<2>().norm();
-  out.final_heading = std::abs(d[kTheta]);
+  if (last_ref->known & (1u << kTheta)) out.final_heading = std::abs(d[kTheta]);
   return out;
 }
 

@@ -513,16 +513,23 @@ void Slam::prune_tentative() {
 }
 
 void Slam::record(const DataStep& data) {
-  trajectory_.push_back({data.t, x_r_});
+  trajectory_.push_back({data.t, x_r_, kAllPoseCoords});
   if (!data.ground_truth) return;
-  ground_truth_.push_back({data.t, *data.ground_truth});
+  ground_truth_.push_back({data.t, *data.ground_truth, data.ground_truth_known});
+  // Robot NEES over the estimated coordinates the ground truth knows.
+  std::vector<int> rows;
+  for (std::size_t i = 0; i < dofs_.size(); ++i)
+    if (data.ground_truth_known & (1u << dofs_[i])) rows.push_back(static_cast<int>(i));
+  if (rows.empty()) return;
   const Pose6 err = pose_difference(x_r_, *data.ground_truth);
-  Eigen::VectorXd e(static_cast<Eigen::Index>(dofs_.size()));
-  for (std::size_t i = 0; i < dofs_.size(); ++i) e[static_cast<Eigen::Index>(i)] = err[dofs_[i]];
-  const Eigen::MatrixXd P = robot_covariance();
+  Eigen::VectorXd e(static_cast<Eigen::Index>(rows.size()));
+  for (std::size_t i = 0; i < rows.size(); ++i) e[static_cast<Eigen::Index>(i)] = err[dofs_[rows[i]]];
+  const Eigen::MatrixXd P = estimator_->marginal(rows);
   const Eigen::LDLT<Eigen::MatrixXd> ldlt(P);
-  if (ldlt.info() == Eigen::Success && (ldlt.vectorD().array() > 0.0).all())
+  if (ldlt.info() == Eigen::Success && (ldlt.vectorD().array() > 0.0).all()) {
     stats_.nees.push_back(e.dot(ldlt.solve(e)));
+    stats_.nees_dof = static_cast<int>(rows.size());
+  }
 }
 
 }  // namespace mspace::kernel

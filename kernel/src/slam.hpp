@@ -79,8 +79,10 @@ struct RunStats {
   double seconds_dense = 0.0;
   double seconds_extend = 0.0;
   double seconds_source = 0.0;
-  /// Robot NEES at every step with ground truth (dims = estimated dofs).
+  /// Robot NEES at every step with ground truth, over the estimated pose
+  /// coordinates the ground truth knows (nees_dof of them).
   std::vector<double> nees;
+  int nees_dof = 0;
 };
 
 class Slam {

@@ -82,7 +82,8 @@ TEST_F(SimRun, DefaultRunMeetsAccuracyBoundsAndBeatsDeadReckoning) {
   EXPECT_EQ(e.matched, static_cast<std::size_t>(slam.summary.steps));
   EXPECT_LT(e.ate_rmse, 0.15);
   EXPECT_LT(e.final_translation, 0.15);
-  EXPECT_LT(e.final_heading * 180.0 / std::numbers::pi, 0.5);
+  ASSERT_TRUE(e.final_heading.has_value());
+  EXPECT_LT(*e.final_heading * 180.0 / std::numbers::pi, 0.5);
 
   const RunResult odo = run(without_sensor(config()));
   ASSERT_TRUE(odo.summary.errors.has_value());

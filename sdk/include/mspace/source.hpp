@@ -1,6 +1,7 @@
 // mspace/source.hpp — data sources: logs, data sets, simulators.
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -13,6 +14,9 @@
 
 namespace mspace {
 
+/// Bit mask of all six pose coordinates (see DataStep::ground_truth_known).
+inline constexpr std::uint8_t kAllPoseCoords = 0x3F;
+
 /// Everything that happened between the previous step and time t.
 struct DataStep {
   double t = 0.0;
@@ -21,6 +25,9 @@ struct DataStep {
   std::vector<SensorReading> readings;
   /// True robot pose at t, when the source knows it (evaluation only).
   std::optional<Pose6> ground_truth;
+  /// Which coordinates of ground_truth are known, as bits (1 << PoseIndex):
+  /// all six by default; a GPS fix knows only (1 << kX) | (1 << kY).
+  std::uint8_t ground_truth_known = kAllPoseCoords;
 };
 
 class DataSource : public PluginObject {
