@@ -30,7 +30,8 @@ const std::vector<std::string> kTopKeys = {"run",     "source",      "motion",  
                                            "sensors", "association", "initial_pose", "output"};
 const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "plugin_path", "seed"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds"};
-const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age"};
+const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
+                                                   "join_distance"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir", "trajectory", "map", "summary", "picture", "picture_size"};
 
@@ -409,6 +410,7 @@ AssociationConfig Reader::read_association(const Item* item) const {
   if (const Item* f = find(fields, "new_feature_probability")) association.new_feature_probability = probability(*f);
   if (const Item* f = find(fields, "tentative_max_age"))
     association.tentative_max_age = static_cast<int>(integer(*f, 1, std::numeric_limits<int>::max()));
+  if (const Item* f = find(fields, "join_distance")) association.join_distance = number(*f, 0.0);
   return association;
 }
 
@@ -539,6 +541,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "gate_probability" << YAML::Value << format_number(c.association.gate_probability);
   out << YAML::Key << "new_feature_probability" << YAML::Value << format_number(c.association.new_feature_probability);
   out << YAML::Key << "tentative_max_age" << YAML::Value << std::to_string(c.association.tentative_max_age);
+  out << YAML::Key << "join_distance" << YAML::Value << format_number(c.association.join_distance);
   out << YAML::EndMap;
 
   out << YAML::Key << "initial_pose" << YAML::Value << YAML::BeginMap;

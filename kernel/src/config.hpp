@@ -13,7 +13,8 @@
 //       mount: [x, y, z, theta, phi, psi]   # required; x_rs, angles in degrees
 //       extractor: {plugin: <name>, <parameters>}                       # required
 //       feeds: [<feature instances>]                                    # required
-//   association:  {gate_probability: 0.99, new_feature_probability: 0.9999, tentative_max_age: 20}
+//   association:  {gate_probability: 0.99, new_feature_probability: 0.9999, tentative_max_age: 20,
+//                  join_distance: 0 (m; 0 = no shared coordinates)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
 //   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000}
 //
@@ -63,6 +64,9 @@ struct AssociationConfig {
   double gate_probability = 0.99;
   double new_feature_probability = 0.9999;
   int tentative_max_age = 20;  ///< steps
+  /// Shared coordinates (T-RO §VI): blocks of two features closer than this
+  /// (m) may be merged into one shared coordinate; 0 turns sharing off.
+  double join_distance = 0.0;
 };
 
 struct OutputConfig {

@@ -46,12 +46,13 @@ RunSummary summarize(const Slam& slam, double wall_seconds) {
   s.wall_seconds = wall_seconds;
   const auto& traj = slam.trajectory();
   if (!traj.empty()) s.data_seconds = traj.back().t - traj.front().t;
+  // Robot, every feature's own dimensions and every shared coordinate once.
   s.state_dimension = static_cast<int>(slam.robot_dofs().size());
+  for (const SharedCoordinate& c : slam.shared_coordinates()) s.state_dimension += static_cast<int>(c.state_idx.size());
   for (const FeatureTypeSlot& type : slam.feature_types()) s.features_by_dim[type.instance];
   for (const MapFeature& f : slam.features()) {
-    const int dim = f.feature->mspace_dim();
-    ++s.features_by_dim[slam.feature_types()[f.type].instance][dim];
-    s.state_dimension += dim;
+    ++s.features_by_dim[slam.feature_types()[f.type].instance][f.feature->mspace_dim()];
+    s.state_dimension += static_cast<int>(f.own_idx.size());
   }
   if (!slam.ground_truth().empty()) {
     // Reference poses are paired with the estimate interpolated at their
@@ -101,9 +102,34 @@ void write_map_yaml(const std::filesystem::path& file, const Slam& slam) {
       y << YAML::Key << "covariance" << YAML::Value;
       emit_matrix(y, slam.feature_covariance(f));
     }
+    if (!f.shared.empty()) {
+      y << YAML::Key << "shared_blocks" << YAML::Value << YAML::Flow << YAML::BeginMap;
+      for (const auto& [block, id] : f.shared) y << YAML::Key << block << YAML::Value << id;
+      y << YAML::EndMap;
+    }
     y << YAML::EndMap;
   }
-  y << YAML::EndSeq << YAML::EndMap;
+  y << YAML::EndSeq;
+  if (!slam.shared_coordinates().empty()) {
+    y << YAML::Key << "shared_coordinates" << YAML::Value << YAML::BeginSeq;
+    for (const SharedCoordinate& c : slam.shared_coordinates()) {
+      y << YAML::BeginMap;
+      y << YAML::Key << "id" << YAML::Value << c.id;
+      y << YAML::Key << "kind" << YAML::Value << block_kind_name(c.kind);
+      y << YAML::Key << "value" << YAML::Value;
+      emit_vector(y, slam.shared_value(c));
+      y << YAML::Key << "members" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+      for (const auto& [feature, block] : c.members)
+        y << YAML::Flow << YAML::BeginMap << YAML::Key << "feature" << YAML::Value << feature << YAML::Key << "block"
+          << YAML::Value << block << YAML::EndMap;
+      y << YAML::EndSeq;
+      y << YAML::Key << "covariance" << YAML::Value;
+      emit_matrix(y, slam.state_covariance(c.state_idx));
+      y << YAML::EndMap;
+    }
+    y << YAML::EndSeq;
+  }
+  y << YAML::EndMap;
   std::ofstream out = open_for_writing(file);
   out << "# mspace map: every feature with its coordinates x_f (map frame), its M-space\n"
          "# dimension and the covariance of its M-space perturbations.\n"
@@ -128,6 +154,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "used_in_updates" << YAML::Value << st.updates;
   y << YAML::Key << "features_created" << YAML::Value << st.created;
   y << YAML::Key << "extensions" << YAML::Value << st.extended;
+  y << YAML::Key << "shared_coordinates" << YAML::Value << st.joined;
   y << YAML::Key << "tentative_pruned" << YAML::Value << st.pruned;
   y << YAML::Key << "readings_without_sensor" << YAML::Value << st.unknown_channel_readings;
   y << YAML::EndMap;
@@ -173,8 +200,9 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   if (s.wall_seconds > 0) os << " (" << std::setprecision(1) << s.data_seconds / s.wall_seconds << "x real time)";
   os << std::setprecision(3) << "\n";
   os << "  measurements " << st.measurements << ", matched " << st.matched << ", used in updates " << st.updates
-     << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned
-     << "\n";
+     << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned;
+  if (st.joined > 0) os << ", shared coordinates " << st.joined;
+  os << "\n";
   os << "  state dimension " << s.state_dimension << "\n";
   for (const auto& [type, by_dim] : s.features_by_dim) {
     os << "  features '" << type << "':";

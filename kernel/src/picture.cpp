@@ -126,6 +126,14 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     }
   }
 
+  // Shared coordinates (e.g. wall corners) as squares.
+  for (const SharedCoordinate& c : slam.shared_coordinates()) {
+    const Eigen::VectorXd p = slam.shared_value(c);
+    if (p.size() < 2) continue;
+    const cv::Point q = v.px(p[0], p[1]);
+    cv::rectangle(img, q - cv::Point(4, 4), q + cv::Point(4, 4), {0, 0, 200}, 2, cv::LINE_AA);
+  }
+
   // Scale bar and legend.
   const double bar = grid;
   const cv::Point bar0(v.margin, size_px - v.margin / 2);
@@ -142,6 +150,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   if (!slam.ground_truth().empty()) legend("true trajectory", {60, 170, 60});
   if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
   legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
+  if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
   cv::putText(img, slam.config().name, {size_px - 220, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
 
   if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());

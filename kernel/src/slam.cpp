@@ -146,6 +146,18 @@ Eigen::MatrixXd Slam::feature_covariance(const MapFeature& f) const {
   return estimator_->marginal(f.state_idx);
 }
 
+Eigen::MatrixXd Slam::state_covariance(const std::vector<int>& idx) const { return estimator_->marginal(idx); }
+
+Eigen::VectorXd Slam::shared_value(const SharedCoordinate& c) const {
+  const auto [feature_id, block] = c.members.front();
+  for (const MapFeature& mf : features_)
+    if (mf.id == feature_id) {
+      const CoordLayout& layout = mf.feature->layout();
+      return mf.feature->coords().segment(layout.offset(block), block_size(layout.kind(block)));
+    }
+  return {};
+}
+
 bool Slam::step() {
   if (config_.max_steps > 0 && step_ >= config_.max_steps) return false;
   DataStep data;
@@ -176,6 +188,7 @@ bool Slam::step() {
   std::sort(touched.begin(), touched.end());
   touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
   extend(touched);
+  if (config_.association.join_distance > 0.0) join_shared_coordinates(touched);
   prune_tentative();
   stats_.seconds_extend += seconds_since(t0);
 
@@ -495,9 +508,156 @@ void Slam::extend(const std::vector<int>& touched) {
     }
     const int first =
         guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
-    for (int i = 0; i < n; ++i) mf.state_idx.push_back(first + i);
+    for (int i = 0; i < n; ++i) mf.own_idx.push_back(first + i);  // new own dims precede shared groups
+    rebuild_state_idx(mf);
     ++stats_.extended;
   }
+}
+
+void Slam::rebuild_state_idx(MapFeature& mf) const {
+  mf.state_idx = mf.own_idx;
+  for (const auto& [block, id] : mf.shared) {
+    const auto it = std::find_if(shared_.begin(), shared_.end(), [id = id](const SharedCoordinate& c) { return c.id == id; });
+    mf.state_idx.insert(mf.state_idx.end(), it->state_idx.begin(), it->state_idx.end());
+  }
+}
+
+// Removes estimator rows and renumbers every index the kernel keeps.
+void Slam::remove_state_rows(std::vector<int> rows) {
+  if (rows.empty()) return;
+  std::sort(rows.begin(), rows.end());
+  guarded(config_.estimator.instance, *estimator_lib_, "remove", [&] { estimator_->remove(rows); });
+  const auto renumber = [&](std::vector<int>& idx) {
+    for (int& i : idx) i -= static_cast<int>(std::lower_bound(rows.begin(), rows.end(), i) - rows.begin());
+  };
+  for (SharedCoordinate& c : shared_) renumber(c.state_idx);
+  for (MapFeature& mf : features_) {
+    renumber(mf.own_idx);
+    rebuild_state_idx(mf);
+  }
+}
+
+// ---- Shared coordinates (T-RO §VI) ------------------------------------------
+
+// After extension, every block of a touched feature that may be shared is
+// compared with the blocks of the same kind of the other features in the
+// estimator; the first pair closer than join_distance whose features agree on
+// a common value becomes one shared coordinate.
+void Slam::join_shared_coordinates(const std::vector<int>& touched) {
+  const double max_d2 = config_.association.join_distance * config_.association.join_distance;
+  for (int a : touched) {
+    const Feature& fa = *features_[a].feature;
+    if (fa.mspace_dim() == 0) continue;
+    const CoordLayout& la = fa.layout();
+    for (int ba = 0; ba < la.num_blocks(); ++ba) {
+      if (la.kind(ba) == BlockKind::Scalar || features_[a].shared.count(ba) || !fa.can_share(ba)) continue;
+      for (std::size_t b = 0; b < features_.size(); ++b) {
+        const MapFeature& mb = features_[b];
+        if (static_cast<int>(b) == a || mb.feature->mspace_dim() == 0) continue;
+        const Feature& fb = *mb.feature;
+        const CoordLayout& lb = fb.layout();
+        bool joined = false;
+        for (int bb = 0; bb < lb.num_blocks() && !joined; ++bb) {
+          if (lb.kind(bb) != la.kind(ba) || mb.shared.count(bb) || !fb.can_share(bb)) continue;
+          const int size = block_size(la.kind(ba));
+          const double d2 =
+              (fa.coords().segment(la.offset(ba), size) - fb.coords().segment(lb.offset(bb), size)).squaredNorm();
+          if (d2 <= max_d2) joined = try_join(a, ba, static_cast<int>(b), bb);
+        }
+        if (joined) break;
+      }
+    }
+  }
+}
+
+// Joins block ba of feature a with block bb of feature b. The new estimator
+// rows are linear in the old ones:
+//   shared point  δc   = J_a B̃_a δp_a + J_b B̃_b δp_b   (from the proposal)
+//   own dims      δq_a = T_a δp_a,  δq_b = T_b δp_b     (from share_block)
+// so they are added with zero extra noise and the old own rows removed.
+bool Slam::try_join(int a, int ba, int b, int bb) {
+  MapFeature& ma = features_[a];
+  MapFeature& mb = features_[b];
+  const FeatureTypeSlot& ta = types_[ma.type];
+  const FeatureTypeSlot& tb = types_[mb.type];
+  const std::optional<JoinProposal> proposal = guarded(ta.instance, *ta.library, "propose_join", [&] {
+    return ma.feature->propose_join(ba, *mb.feature, bb);
+  });
+  if (!proposal) return false;
+  const int k = block_size(ma.feature->layout().kind(ba));
+  const std::string who = ta.instance + " (plugin '" + ta.plugin + "')";
+  if (proposal->value.size() != k || proposal->J_this.rows() != k ||
+      proposal->J_this.cols() != ma.feature->layout().size() || proposal->J_other.rows() != k ||
+      proposal->J_other.cols() != mb.feature->layout().size())
+    throw PluginError(who + ": propose_join returned matrices of the wrong size");
+  require_finite(proposal->value, "join value", ta.instance, *ta.library);
+  require_finite(proposal->J_this, "join J_this", ta.instance, *ta.library);
+  require_finite(proposal->J_other, "join J_other", ta.instance, *ta.library);
+
+  // Everything below is linear in the old perturbations of both features.
+  const std::vector<int> old_a = ma.state_idx, old_b = mb.state_idx;
+  std::vector<int> idx = old_a;
+  for (int i : old_b)
+    if (std::find(idx.begin(), idx.end(), i) == idx.end()) idx.push_back(i);
+  const auto column = [&](int state_index) {
+    return static_cast<Eigen::Index>(std::find(idx.begin(), idx.end(), state_index) - idx.begin());
+  };
+  Eigen::MatrixXd J_corner = Eigen::MatrixXd::Zero(k, static_cast<Eigen::Index>(idx.size()));
+  const Eigen::MatrixXd Ja = proposal->J_this * ma.feature->B_dual();
+  const Eigen::MatrixXd Jb = proposal->J_other * mb.feature->B_dual();
+  for (std::size_t j = 0; j < old_a.size(); ++j) J_corner.col(column(old_a[j])) += Ja.col(static_cast<Eigen::Index>(j));
+  for (std::size_t j = 0; j < old_b.size(); ++j) J_corner.col(column(old_b[j])) += Jb.col(static_cast<Eigen::Index>(j));
+
+  const int old_dim_a = ma.feature->mspace_dim(), old_dim_b = mb.feature->mspace_dim();
+  const Eigen::MatrixXd T_a =
+      guarded(ta.instance, *ta.library, "share_block", [&] { return ma.feature->share_block(ba, proposal->value); });
+  const Eigen::MatrixXd T_b =
+      guarded(tb.instance, *tb.library, "share_block", [&] { return mb.feature->share_block(bb, proposal->value); });
+  const auto check = [&](const MapFeature& m, const FeatureTypeSlot& t, const Eigen::MatrixXd& T, int old_dim) {
+    int shared_after = k;  // the new shared block plus those shared before
+    for (const auto& entry : m.shared) shared_after += block_size(m.feature->layout().kind(entry.first));
+    if (T.cols() != old_dim || m.feature->mspace_dim() != T.rows() + shared_after)
+      throw PluginError(t.instance + " (plugin '" + t.plugin + "'): share_block returned T of size " +
+                        std::to_string(T.rows()) + "x" + std::to_string(T.cols()) + " for a feature of dimension " +
+                        std::to_string(old_dim) + " -> " + std::to_string(m.feature->mspace_dim()));
+    require_finite(T, "share_block T", t.instance, *t.library);
+  };
+  check(ma, ta, T_a, old_dim_a);
+  check(mb, tb, T_b, old_dim_b);
+
+  auto augment = [&](const std::vector<int>& on, const Eigen::MatrixXd& J) {
+    StateAugmentation aug;
+    aug.idx = on;
+    aug.J = J;
+    aug.C_new = Eigen::MatrixXd::Zero(J.rows(), J.rows());
+    return guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
+  };
+  SharedCoordinate corner;
+  corner.id = next_shared_id_++;
+  corner.kind = ma.feature->layout().kind(ba);
+  const int first_corner = augment(idx, J_corner);
+  for (int i = 0; i < k; ++i) corner.state_idx.push_back(first_corner + i);
+  corner.members = {{ma.id, ba}, {mb.id, bb}};
+  std::vector<int> obsolete = ma.own_idx;
+  obsolete.insert(obsolete.end(), mb.own_idx.begin(), mb.own_idx.end());
+  ma.own_idx.clear();
+  mb.own_idx.clear();
+  if (T_a.rows() > 0) {
+    const int first = augment(old_a, T_a);
+    for (int i = 0; i < T_a.rows(); ++i) ma.own_idx.push_back(first + i);
+  }
+  if (T_b.rows() > 0) {
+    const int first = augment(old_b, T_b);
+    for (int i = 0; i < T_b.rows(); ++i) mb.own_idx.push_back(first + i);
+  }
+  ma.shared[ba] = corner.id;
+  mb.shared[bb] = corner.id;
+  shared_.push_back(corner);
+  remove_state_rows(obsolete);  // also rebuilds every state_idx
+  ++stats_.joined;
+  log_->debug("step ", step_, ": ", ta.instance, " #", ma.id, " block ", ba, " and ", tb.instance, " #", mb.id,
+              " block ", bb, " now share coordinate ", corner.id, " at ", proposal->value.transpose());
+  return true;
 }
 
 // Tentative features (dimension 0, never in the estimator) that are not seen

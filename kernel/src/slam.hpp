@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -36,12 +37,26 @@ struct MapFeature {
   int id = 0;
   int type = 0;                      ///< index into Slam::feature_types()
   std::shared_ptr<Feature> feature;  ///< keeps its plugin library loaded
-  std::vector<int> state_idx;        ///< estimator indices of its M-space dims
+  /// Estimator indices of its M-space columns, in the feature's column order:
+  /// own_idx, then the shared blocks' indices in ascending block order.
+  std::vector<int> state_idx;
+  std::vector<int> own_idx;        ///< indices of the feature's own dimensions
+  std::map<int, int> shared;       ///< coordinate block → SharedCoordinate id
   std::int64_t created_step = 0;
   std::int64_t last_seen_step = 0;
   int last_sensor = 0;      ///< sensor of the newest evidence
   double last_seen_t = 0.0;  ///< time stamp of the newest evidence
   int times_matched = 0;
+};
+
+/// A coordinate block common to several features (T-RO §VI), e.g. the corner
+/// of two walls: one set of estimator rows that every member's B̃ maps with
+/// the identity (eq. 33).
+struct SharedCoordinate {
+  int id = 0;
+  BlockKind kind = BlockKind::Point2D;
+  std::vector<int> state_idx;                ///< block_size(kind) estimator rows
+  std::vector<std::pair<int, int>> members;  ///< (feature id, block)
 };
 
 /// A feature-type instance from the YAML (`features: {name: {plugin: …}}`).
@@ -71,6 +86,7 @@ struct RunStats {
   std::int64_t updates = 0;  ///< matched measurements used in an estimator update
   std::int64_t created = 0;
   std::int64_t extended = 0;
+  std::int64_t joined = 0;  ///< shared coordinates created
   std::int64_t pruned = 0;
   std::int64_t unknown_channel_readings = 0;
   double seconds_predict = 0.0;
@@ -105,9 +121,14 @@ class Slam {
   const std::vector<StampedPose>& trajectory() const { return trajectory_; }
   const std::vector<StampedPose>& ground_truth() const { return ground_truth_; }
   const std::vector<MapFeature>& features() const { return features_; }
+  const std::vector<SharedCoordinate>& shared_coordinates() const { return shared_; }
   const std::vector<FeatureTypeSlot>& feature_types() const { return types_; }
   /// Covariance of a feature's M-space perturbations (dim × dim).
   Eigen::MatrixXd feature_covariance(const MapFeature& f) const;
+  /// Covariance of the given estimator rows.
+  Eigen::MatrixXd state_covariance(const std::vector<int>& idx) const;
+  /// Current value of a shared coordinate (from its first member).
+  Eigen::VectorXd shared_value(const SharedCoordinate& c) const;
   const RunStats& stats() const { return stats_; }
   std::size_t size_hint() const;
   Eigen::MatrixXd true_landmarks() const;
@@ -124,6 +145,10 @@ class Slam {
   void update(std::vector<Match>& matches);
   void add_dense_information(std::vector<ReadingWork>& work);
   void extend(const std::vector<int>& touched);
+  void join_shared_coordinates(const std::vector<int>& touched);
+  bool try_join(int a, int block_a, int b, int block_b);
+  void remove_state_rows(std::vector<int> rows);
+  void rebuild_state_idx(MapFeature& mf) const;
   void prune_tentative();
   void record(const DataStep& data);
   SensorView sensor_view(int sensor_index, double t) const;
@@ -138,6 +163,8 @@ class Slam {
   std::vector<FeatureTypeSlot> types_;
   std::vector<SensorSlot> sensors_;
   std::vector<MapFeature> features_;
+  std::vector<SharedCoordinate> shared_;
+  int next_shared_id_ = 1;
 
   std::vector<int> dofs_;     ///< robot pose coordinates in the state
   std::vector<int> robot_idx_;  ///< 0..k−1

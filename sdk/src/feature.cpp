@@ -4,6 +4,10 @@
 
 namespace mspace {
 
+Eigen::MatrixXd Feature::share_block(int, const Eigen::VectorXd&) {
+  throw std::logic_error("this feature type does not implement Feature::share_block()");
+}
+
 std::optional<FeatureSample> FeatureType::sample(int, std::uint64_t) const {
   throw std::logic_error("this feature type does not implement FeatureType::sample(), so it cannot be checked");
 }

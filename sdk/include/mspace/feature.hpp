@@ -54,6 +54,16 @@ struct SavedFeature {
 
 class Feature;
 
+/// Shared coordinates (T-RO §VI): what a feature proposes when one of its
+/// coordinate blocks is to be shared with a block of another feature — the
+/// common value (e.g. the corner where two walls meet) and its Jacobians with
+/// respect to both features' coordinates.
+struct JoinProposal {
+  Eigen::VectorXd value;    ///< the shared block's coordinates (block size)
+  Eigen::MatrixXd J_this;   ///< ∂value/∂x_f of the proposing feature (k × n)
+  Eigen::MatrixXd J_other;  ///< ∂value/∂x_f of the other feature (k × n_other)
+};
+
 /// A random valid configuration for the conformance suite (`mspace check`):
 /// a feature at a given M-space dimension, a sensor pose that sees it and a
 /// measurement consistent with it (innovation ≈ 0 up to noise).
@@ -102,6 +112,30 @@ class Feature {
   /// dimension — the symmetries outside the M-space (e.g. sliding unmeasured
   /// wall end points along the wall). Zero columns: none declared.
   virtual Eigen::MatrixXd symmetry_directions() const { return {}; }
+
+  // ---- Shared coordinates (T-RO §VI, eq. 33) -------------------------------
+  //
+  // M-space columns are ordered: the feature's own dimensions first, then one
+  // group per shared block in ascending block order (block_size columns each,
+  // the identity: the shared point's x, y [, z] perturbation). Extensions add
+  // own dimensions (before the shared groups).
+
+  /// Whether block `block` may be shared now (e.g. a wall end point once the
+  /// wall is in the map). Default: never.
+  virtual bool can_share(int /*block*/) const { return false; }
+  /// The common value when this feature's `block` is to be shared with
+  /// `other`'s `other_block` (same kind, close together). std::nullopt to
+  /// refuse (e.g. two walls that are nearly parallel).
+  virtual std::optional<JoinProposal> propose_join(int /*block*/, const Feature& /*other*/,
+                                                   int /*other_block*/) const {
+    return std::nullopt;
+  }
+  /// Makes `block` shared: its coordinates become `value`, its M-space columns
+  /// the identity, and the own dimensions are redefined. Returns T (new own
+  /// dims × old M-space dim): the new own perturbations as a linear function
+  /// of the old ones, which the estimator uses to carry the covariance over.
+  /// The default throws std::logic_error.
+  virtual Eigen::MatrixXd share_block(int block, const Eigen::VectorXd& value);
 
   /// The feature's state for map files; FeatureType::restore inverts it.
   virtual SavedFeature save() const { return SavedFeature{x_, mdim_, {}}; }
