@@ -18,7 +18,7 @@ RUN_DEFAULT=1
 PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libopencv-dev libboost-dev libboost-filesystem-dev
-  libyaml-cpp-dev libspdlog-dev libcli11-dev
+  libyaml-cpp-dev libspdlog-dev libcli11-dev libpng-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 

@@ -318,11 +318,12 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
     if (gate_cov.size() > 0) M += J_of * gate_cov * J_of.transpose();
 
     for (std::size_t mi = 0; mi < meas.size(); ++mi) {
-      Candidate c;
+      // The scratch objects keep their storage from pair to pair: this loop
+      // runs for every (feature, measurement) pair of every reading.
+      Innovation& in = scratch_innovation_;
       const bool ok = guarded(type.instance, *type.library, "innovation",
-                              [&] { return f.innovation(x_o, meas[mi], c.innovation); });
+                              [&] { return f.innovation(x_o, meas[mi], in); });
       if (!ok) continue;
-      const Innovation& in = c.innovation;
       const auto m = in.eta.size();
       if (m == 0 || in.J_eta_o.rows() != m || in.J_eta_o.cols() != layout.size() || in.J_eta_v.rows() != m ||
           in.J_eta_v.cols() != meas[mi].v.size())
@@ -331,17 +332,24 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
       require_finite(in.eta, "innovation", type.instance, *type.library);
       require_finite(in.J_eta_o, "J_eta_o", type.instance, *type.library);
       require_finite(in.J_eta_v, "J_eta_v", type.instance, *type.library);
-      c.C_eta = in.J_eta_v * meas[mi].C_v * in.J_eta_v.transpose();
-      const Eigen::MatrixXd S = in.J_eta_o * M * in.J_eta_o.transpose() + c.C_eta;  // eq. 29
-      const Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
-      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0.0).all()) continue;
-      c.d2 = in.eta.dot(ldlt.solve(in.eta));
+      Eigen::MatrixXd& C_eta = scratch_C_eta_;
+      Eigen::MatrixXd& S = scratch_S_;
+      C_eta.noalias() = in.J_eta_v * meas[mi].C_v * in.J_eta_v.transpose();
+      S.noalias() = in.J_eta_o * M * in.J_eta_o.transpose();  // eq. 29
+      S += C_eta;
+      scratch_ldlt_.compute(S);
+      if (scratch_ldlt_.info() != Eigen::Success || !(scratch_ldlt_.vectorD().array() > 0.0).all()) continue;
+      const double d2 = in.eta.dot(scratch_ldlt_.solve(in.eta));
       const int mi_dim = static_cast<int>(m);
-      closest[mi] = std::min(closest[mi], c.d2 / threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
+      closest[mi] = std::min(closest[mi], d2 / threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
       if (log_->enabled(LogLevel::Trace))
-        log_->trace("step ", step_, ": measurement ", mi, " vs #", mf.id, " (dim ", dim, "): d2 ", c.d2, " eta ",
+        log_->trace("step ", step_, ": measurement ", mi, " vs #", mf.id, " (dim ", dim, "): d2 ", d2, " eta ",
                     in.eta.transpose());
-      if (c.d2 > threshold(gate_chi2_, ac.gate_probability, mi_dim)) continue;
+      if (d2 > threshold(gate_chi2_, ac.gate_probability, mi_dim)) continue;
+      Candidate c;
+      c.d2 = d2;
+      c.innovation = in;
+      c.C_eta = C_eta;
       c.measurement = static_cast<int>(mi);
       c.feature = static_cast<int>(fi);
       c.J_state = in.J_eta_o * A;  // eq. 30: J_ηo (J_or  J_of B̃)

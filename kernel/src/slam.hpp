@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 
 #include "config.hpp"
@@ -177,6 +178,10 @@ class Slam {
   double gate_cache_p_ = -1.0;
   std::vector<double> gate_chi2_;      ///< by innovation dimension
   std::vector<double> new_feature_chi2_;
+  // Reused by associate() for every (feature, measurement) pair.
+  Innovation scratch_innovation_;
+  Eigen::MatrixXd scratch_C_eta_, scratch_S_;
+  Eigen::LDLT<Eigen::MatrixXd> scratch_ldlt_;
   std::vector<StampedPose> trajectory_;
   std::vector<StampedPose> ground_truth_;
   RunStats stats_;
