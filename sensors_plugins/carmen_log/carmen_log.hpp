@@ -1,0 +1,55 @@
+// carmen_log.hpp — the `carmen_log` data source: a 2-D laser log (CARMEN
+// CLF / GMapping-written log, or the Intel data set's merged table, see
+// carmen_reader.hpp) replayed one scan per step.
+//
+// Each step is one scan:
+//   - DataStep::t: the scan's time stamp (+ time_offset);
+//   - DataStep::odometry: x_d = (dx, dy, dθ), the odometry motion since the
+//     previous scan expressed in the previous odometry pose's frame — the
+//     increment of the `odometry2d` motion model (planar_odometry.hpp). The
+//     first step has none;
+//   - one SensorReading on `channel` whose `values` has one row per beam, in
+//     beam order: (range, bearing) in m and rad in the laser frame, range 0
+//     for a beam with no return (the `laser_lines` extractor relies on the
+//     beam order and on seeing the no-return beams);
+//   - DataStep::ground_truth: the GMapping-corrected pose when the file has
+//     one (table, GMapping log) and `ground_truth` is on.
+// The initial pose is the first scan's ground truth (initial_pose:
+// ground_truth, falling back to odometry when there is none), its odometry
+// pose, or zero.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "carmen_reader.hpp"
+#include "mspace/params.hpp"
+#include "mspace/source.hpp"
+
+namespace mspace::carmen_log {
+
+class CarmenLogSource final : public DataSource {
+ public:
+  /// The declared parameters (file, format, variant, channel, …).
+  static std::vector<ParamSpec> param_specs();
+
+  /// Reads the whole file (throws std::runtime_error "file:line: problem").
+  explicit CarmenLogSource(const PluginArgs& args);
+
+  bool next(DataStep& step) override;
+  std::size_t size_hint() const override { return log_.scans.size(); }
+  Pose6 initial_pose() const override { return initial_pose_; }
+
+  const LogContents& contents() const { return log_; }
+
+ private:
+  LogContents log_;
+  std::string channel_;
+  bool use_ground_truth_ = true;
+  Pose6 initial_pose_ = Pose6::Zero();
+  std::size_t next_ = 0;
+  Logger* log_out_ = nullptr;
+};
+
+}  // namespace mspace::carmen_log

@@ -1,0 +1,37 @@
+// laser_lines.hpp — the `laser_lines` extractor: one planar laser scan →
+// "line_segment2d" measurements (mspace/measurements/line_segment2d.hpp), by the
+// split-and-merge method of line_extraction.hpp.
+//
+// Input: a SensorReading whose `values` has one row per beam in beam order,
+// (range, bearing) in m and rad, range 0 for no return (what `carmen_log`
+// delivers). A reading with another column count or non-finite numbers is an
+// error naming the channel and time.
+#pragma once
+
+#include <vector>
+
+#include "line_extraction.hpp"
+#include "mspace/extractor.hpp"
+#include "mspace/params.hpp"
+
+namespace mspace::laser_lines {
+
+/// The Measurement of one segment: v = (ρ, α, s_a, s_b), C_v, inliers as
+/// dense (2 × N), end flags.
+Measurement to_measurement(const Segment& segment);
+
+class LaserLinesExtractor final : public Extractor {
+ public:
+  static std::vector<ParamSpec> param_specs();
+  explicit LaserLinesExtractor(const PluginArgs& args);
+  explicit LaserLinesExtractor(const LineConfig& config) : config_(config) {}
+
+  void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
+
+  const LineConfig& config() const { return config_; }
+
+ private:
+  LineConfig config_;
+};
+
+}  // namespace mspace::laser_lines

@@ -1,0 +1,294 @@
+// line_extraction.cpp — see line_extraction.hpp.
+#include "line_extraction.hpp"
+
+#include <Eigen/LU>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <utility>
+
+namespace mspace::laser_lines {
+namespace {
+
+using line_segment::EndReason;
+using Vec2 = Eigen::Vector2d;
+
+/// The scan as points, with which beams have a usable return.
+struct ScanPoints {
+  const Eigen::VectorXd& ranges;
+  const Eigen::VectorXd& bearings;
+  Eigen::Matrix2Xd p;
+  std::vector<bool> valid;
+  int size() const { return static_cast<int>(valid.size()); }
+};
+
+/// Total-least-squares line through points first..last.
+struct LineFit {
+  double rho = 0.0, alpha = 0.0;
+  Vec2 centroid = Vec2::Zero();
+  double rms = 0.0, max_residual = 0.0;
+  double sum_s2 = 0.0;  ///< Σ (t·(p − c))²
+  int n = 0;
+  Vec2 u() const { return {std::cos(alpha), std::sin(alpha)}; }
+  Vec2 t() const { return {std::sin(alpha), -std::cos(alpha)}; }
+  double residual(const Vec2& q) const { return u().dot(q) - rho; }
+};
+
+LineFit fit_line(const ScanPoints& scan, int first, int last) {
+  LineFit fit;
+  fit.n = last - first + 1;
+  const auto block = scan.p.middleCols(first, fit.n);
+  fit.centroid = block.rowwise().mean();
+  const Eigen::Matrix2Xd d = block.colwise() - fit.centroid;
+  const double sxx = d.row(0).squaredNorm(), syy = d.row(1).squaredNorm(), sxy = d.row(0).dot(d.row(1));
+  const double direction = 0.5 * std::atan2(2.0 * sxy, sxx - syy);  // principal axis
+  Vec2 normal(-std::sin(direction), std::cos(direction));
+  double rho = normal.dot(fit.centroid);
+  if (rho < 0.0) {
+    normal = -normal;
+    rho = -rho;
+  }
+  fit.rho = rho;
+  fit.alpha = std::atan2(normal.y(), normal.x());
+  double sum_r2 = 0.0;
+  for (int i = 0; i < fit.n; ++i) {
+    const double r = normal.dot(block.col(i)) - rho;
+    sum_r2 += r * r;
+    fit.max_residual = std::max(fit.max_residual, std::abs(r));
+    const double s = fit.t().dot(d.col(i));
+    fit.sum_s2 += s * s;
+  }
+  fit.rms = std::sqrt(sum_r2 / fit.n);
+  return fit;
+}
+
+/// Step 1: runs of valid beams split at adaptive breakpoints.
+std::vector<std::pair<int, int>> clusters(const ScanPoints& scan, const LineConfig& c) {
+  std::vector<std::pair<int, int>> out;
+  int start = -1;
+  for (int i = 0; i < scan.size(); ++i) {
+    if (!scan.valid[i]) {
+      if (start >= 0) out.emplace_back(start, i - 1);
+      start = -1;
+      continue;
+    }
+    if (start >= 0) {
+      const double dphi = std::abs(scan.bearings[i] - scan.bearings[i - 1]);
+      const double r = std::min(scan.ranges[i], scan.ranges[i - 1]);
+      const double limit = r * std::sin(dphi) / std::sin(c.breakpoint_lambda - dphi) + 3.0 * c.range_sigma;
+      if ((scan.p.col(i) - scan.p.col(i - 1)).norm() > limit) {
+        out.emplace_back(start, i - 1);
+        start = i;
+      }
+    } else {
+      start = i;
+    }
+  }
+  if (start >= 0) out.emplace_back(start, scan.size() - 1);
+  return out;
+}
+
+/// Distance of q from the chord a–b.
+double chord_distance(const Vec2& a, const Vec2& b, const Vec2& q) {
+  const Vec2 d = b - a;
+  const double len = d.norm();
+  if (len < 1e-12) return (q - a).norm();
+  return std::abs(d.x() * (q.y() - a.y()) - d.y() * (q.x() - a.x())) / len;
+}
+
+/// Step 2: iterative end-point fit; pieces share their split point.
+void split(const ScanPoints& scan, int first, int last, double threshold, std::vector<std::pair<int, int>>& out) {
+  if (last - first >= 2) {
+    int worst = first;
+    double worst_d = 0.0;
+    for (int k = first + 1; k < last; ++k) {
+      const double d = chord_distance(scan.p.col(first), scan.p.col(last), scan.p.col(k));
+      if (d > worst_d) {
+        worst_d = d;
+        worst = k;
+      }
+    }
+    if (worst_d > threshold) {
+      split(scan, first, worst, threshold, out);
+      split(scan, worst, last, threshold, out);
+      return;
+    }
+  }
+  out.emplace_back(first, last);
+}
+
+/// Step 3: merges neighbouring pieces whose joint fit stays within threshold.
+void merge(const ScanPoints& scan, double threshold, std::vector<std::pair<int, int>>& pieces) {
+  for (std::size_t i = 0; i + 1 < pieces.size();) {
+    if (pieces[i].second >= pieces[i + 1].first &&
+        fit_line(scan, pieces[i].first, pieces[i + 1].second).max_residual <= threshold) {
+      pieces[i].second = pieces[i + 1].second;
+      pieces.erase(pieces.begin() + static_cast<std::ptrdiff_t>(i) + 1);
+    } else {
+      ++i;
+    }
+  }
+}
+
+/// Step 4: trims ends farther than `limit` from the fitted line (a few points at most).
+LineFit trim(const ScanPoints& scan, int& first, int& last, double limit) {
+  LineFit fit = fit_line(scan, first, last);
+  for (int round = 0; round < 3 && last - first >= 2; ++round) {
+    const bool bad_first = std::abs(fit.residual(scan.p.col(first))) > limit;
+    const bool bad_last = std::abs(fit.residual(scan.p.col(last))) > limit;
+    if (!bad_first && !bad_last) break;
+    if (bad_first) ++first;
+    if (bad_last) --last;
+    fit = fit_line(scan, first, last);
+  }
+  return fit;
+}
+
+/// Where beam `beam` crosses the line, as a range; NaN when the beam is grazing or points away.
+double expected_range(const LineFit& fit, double bearing, const LineConfig& c) {
+  const double cosine = std::cos(bearing - fit.alpha);
+  if (cosine < std::cos(c.max_incidence)) return std::numeric_limits<double>::quiet_NaN();
+  return fit.rho / cosine;
+}
+
+/// Smallest angle between two lines (0 … π/2).
+double line_angle(double a, double b) {
+  const double d = std::abs(std::remainder(a - b, std::numbers::pi));
+  return d;
+}
+
+/// Intersection of two lines in (ρ, α) form; false when nearly parallel.
+bool intersect(const Segment& a, const Segment& b, Vec2& q) {
+  Eigen::Matrix2d A;
+  A << std::cos(a.alpha), std::sin(a.alpha), std::cos(b.alpha), std::sin(b.alpha);
+  if (std::abs(A.determinant()) < 1e-6) return false;
+  q = A.inverse() * Vec2(a.rho, b.rho);
+  return true;
+}
+
+Vec2 end_point(const Segment& s, double along) {
+  const Vec2 u(std::cos(s.alpha), std::sin(s.alpha)), t(std::sin(s.alpha), -std::cos(s.alpha));
+  return s.rho * u + along * t;
+}
+
+/// Is segment `self` meeting another segment at a corner at the end whose last inlier is beam `end_beam`?
+bool is_corner(const std::vector<Segment>& segs, std::size_t self, int end_beam, double end_s, const LineConfig& c) {
+  for (std::size_t k = 0; k < segs.size(); ++k) {
+    if (k == self) continue;
+    const Segment& o = segs[k];
+    const int beam_gap = std::min(std::abs(o.first - end_beam), std::abs(o.last - end_beam));
+    if (beam_gap > 2 || line_angle(o.alpha, segs[self].alpha) < c.min_corner_angle) continue;
+    Vec2 q;
+    if (intersect(segs[self], o, q) && (q - end_point(segs[self], end_s)).norm() <= c.corner_distance) return true;
+  }
+  return false;
+}
+
+/// Why segment `self` stops at its end with last inlier `end_beam`; `step` = ±1 points outwards.
+EndReason classify_end(const ScanPoints& scan, const std::vector<Segment>& segs, const std::vector<LineFit>& fits,
+                       std::size_t self, int end_beam, int step, double end_s, const LineConfig& c) {
+  const int j = end_beam + step;
+  if (j < 0 || j >= scan.size()) return EndReason::Fov;
+  const double r = scan.ranges[j];
+  if (!scan.valid[j]) return r > 0.0 && r < c.min_range ? EndReason::Occluded : EndReason::MaxRange;
+  if (is_corner(segs, self, end_beam, end_s, c)) return EndReason::Corner;
+  const double expected = expected_range(fits[self], scan.bearings[j], c);
+  if (!std::isfinite(expected)) return EndReason::Unknown;
+  if (r < expected - c.depth_jump) return EndReason::Occluded;
+  if (r > expected + c.depth_jump) return EndReason::Depth;
+  return EndReason::Unknown;
+}
+
+/// Variance of an end's position along the line: σ² + gap²/12, the gap being
+/// the stretch between the last inlier and where the next beam crosses the line.
+double end_variance(const ScanPoints& scan, const LineFit& fit, int end_beam, int step, double end_s,
+                    double sigma2, const LineConfig& c) {
+  constexpr double kMaxGap = 1.0;
+  const int j = end_beam + step;
+  double gap = scan.ranges[end_beam] * std::abs(scan.bearings[std::clamp(j, 0, scan.size() - 1)] -
+                                                scan.bearings[end_beam]);
+  if (j >= 0 && j < scan.size()) {
+    const double expected = expected_range(fit, scan.bearings[j], c);
+    if (std::isfinite(expected)) {
+      const Vec2 q = expected * Vec2(std::cos(scan.bearings[j]), std::sin(scan.bearings[j]));
+      gap = std::abs(fit.t().dot(q) - end_s);
+    }
+  }
+  gap = std::min(gap, kMaxGap);
+  return sigma2 + gap * gap / 12.0;
+}
+
+/// (ρ, α) covariance of a fit (see header) with the configured floors.
+Eigen::Matrix2d line_covariance(const LineFit& fit, double sigma2, const LineConfig& c) {
+  const double var_offset = sigma2 / fit.n;
+  const double var_alpha = sigma2 / std::max(fit.sum_s2, 1e-12);
+  // ρ = u(α)·c at the centroid: δρ = δd + (t'·c) δα with t' = du/dα.
+  const double lever = Vec2(-std::sin(fit.alpha), std::cos(fit.alpha)).dot(fit.centroid);
+  Eigen::Matrix2d J;
+  J << 1.0, lever, 0.0, 1.0;
+  Eigen::Matrix2d C = J * Eigen::Vector2d(var_offset, var_alpha).asDiagonal() * J.transpose();
+  C(0, 0) += c.distance_sigma_floor * c.distance_sigma_floor;
+  C(1, 1) += c.angle_sigma_floor * c.angle_sigma_floor;
+  return C;
+}
+
+}  // namespace
+
+std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen::VectorXd& bearings,
+                                      const LineConfig& c) {
+  ScanPoints scan{ranges, bearings, Eigen::Matrix2Xd(2, ranges.size()), std::vector<bool>(ranges.size())};
+  for (Eigen::Index i = 0; i < ranges.size(); ++i) {
+    scan.valid[i] = std::isfinite(ranges[i]) && ranges[i] >= c.min_range && ranges[i] <= c.max_range;
+    scan.p.col(i) = ranges[i] * Vec2(std::cos(bearings[i]), std::sin(bearings[i]));
+  }
+
+  std::vector<std::pair<int, int>> pieces;
+  for (const auto& [first, last] : clusters(scan, c)) {
+    std::vector<std::pair<int, int>> cluster_pieces;
+    split(scan, first, last, c.split_distance, cluster_pieces);
+    merge(scan, c.split_distance, cluster_pieces);
+    pieces.insert(pieces.end(), cluster_pieces.begin(), cluster_pieces.end());
+  }
+
+  const double trim_limit = std::max(3.0 * c.range_sigma, 0.5 * c.split_distance);
+  std::vector<Segment> segs;
+  std::vector<LineFit> fits;
+  for (auto [first, last] : pieces) {
+    if (last - first + 1 < c.min_points) continue;
+    const LineFit fit = trim(scan, first, last, trim_limit);
+    if (fit.n < c.min_points || fit.rms > c.max_rms || fit.rho < 1e-3) continue;
+    Segment s;
+    s.first = first;
+    s.last = last;
+    s.rho = fit.rho;
+    s.alpha = fit.alpha;
+    s.rms = fit.rms;
+    s.inliers = scan.p.middleCols(first, fit.n);
+    const double s_first = fit.t().dot(scan.p.col(first)), s_last = fit.t().dot(scan.p.col(last));
+    s.s_a = std::min(s_first, s_last);
+    s.s_b = std::max(s_first, s_last);
+    if (s.s_b - s.s_a < c.min_length) continue;
+    segs.push_back(std::move(s));
+    fits.push_back(fit);
+  }
+
+  for (std::size_t k = 0; k < segs.size(); ++k) {
+    Segment& s = segs[k];
+    const LineFit& fit = fits[k];
+    const double sigma2 = std::max(fit.rms * fit.rms * fit.n / std::max(1, fit.n - 2), c.range_sigma * c.range_sigma);
+    // Which beam end is the s_a end: s decreases as the bearing grows when
+    // t·(beam direction) does, so compare the two ends directly.
+    const bool first_is_a = fit.t().dot(scan.p.col(s.first)) <= fit.t().dot(scan.p.col(s.last));
+    const int beam_a = first_is_a ? s.first : s.last, step_a = first_is_a ? -1 : 1;
+    const int beam_b = first_is_a ? s.last : s.first, step_b = -step_a;
+    s.end_a = classify_end(scan, segs, fits, k, beam_a, step_a, s.s_a, c);
+    s.end_b = classify_end(scan, segs, fits, k, beam_b, step_b, s.s_b, c);
+    s.C.topLeftCorner<2, 2>() = line_covariance(fit, sigma2, c);
+    s.C(2, 2) = end_variance(scan, fit, beam_a, step_a, s.s_a, sigma2, c);
+    s.C(3, 3) = end_variance(scan, fit, beam_b, step_b, s.s_b, sigma2, c);
+  }
+  return segs;
+}
+
+}  // namespace mspace::laser_lines

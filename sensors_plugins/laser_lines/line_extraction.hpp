@@ -1,0 +1,73 @@
+// line_extraction.hpp — line segments from one planar laser scan.
+//
+// Method (split-and-merge with robust fitting):
+//   1. Clustering: consecutive beams with returns belong to the same cluster
+//      unless the gap between their points exceeds the adaptive breakpoint
+//      distance of Borges & Aldon, r·sin Δφ / sin(λ − Δφ) + 3σ.
+//   2. Split: iterative end-point fit — a cluster is split at the point
+//      farthest from the chord through its ends while that distance exceeds
+//      split_distance.
+//   3. Merge: neighbouring pieces of one cluster whose joint fit stays within
+//      split_distance are merged again.
+//   4. Fit: total least squares; points farther than 3σ from the line are
+//      trimmed from the segment's ends (mixed pixels at edges, a corner
+//      point). Segments with fewer than min_points inliers, shorter than
+//      min_length or with rms residual above max_rms are dropped (clutter:
+//      chairs, people, plants).
+// Covariance of (ρ, α), from the inliers: σ² is the residual variance (but
+// at least range_sigma²); the offset at the centroid has variance σ²/N and
+// the direction σ²/Σ s_i² (s along the line from the centroid); ρ = u·c is
+// then linearised at the centroid c, var(ρ) = σ²/N + (t·c)²·var(α). Optional
+// floors add systematic errors. End points: each end is known to lie between
+// its last inlier and where the next beam crosses the line; the variance is
+// σ² + gap²/12.
+// End classification (mspace/measurements/line_segment2d.hpp) from the neighbouring
+// beam beyond each end: outside the scan → Fov; no return → MaxRange; the
+// next segment meets this one at an angle ≥ min_corner_angle within
+// corner_distance → Corner; otherwise the line's expected range on that
+// beam, ρ / cos(φ − α), against the measured one: shorter by more than
+// depth_jump → Occluded, longer → Depth, neither (or a grazing beam) → Unknown.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "mspace/measurements/line_segment2d.hpp"
+
+namespace mspace::laser_lines {
+
+struct LineConfig {
+  double range_sigma = 0.01;          ///< range noise std (m), lower bound of σ
+  double min_range = 0.05;            ///< shorter ranges are no return (m)
+  double max_range = 30.0;            ///< longer ranges count as no return (m)
+  double breakpoint_lambda = 0.1745;  ///< λ of the adaptive breakpoint detector (rad, 10°)
+  double split_distance = 0.05;       ///< split/merge threshold (m)
+  int min_points = 8;
+  double min_length = 0.4;            ///< m
+  double max_rms = 0.03;              ///< m
+  double depth_jump = 0.15;           ///< m
+  double min_corner_angle = 0.5236;   ///< rad (30°)
+  double corner_distance = 0.25;      ///< m
+  double max_incidence = 1.309;       ///< beams at more than this from the normal are grazing (rad, 75°)
+  double distance_sigma_floor = 0.0;  ///< m, added in quadrature to σ_ρ
+  double angle_sigma_floor = 0.0;     ///< rad, added in quadrature to σ_α
+};
+
+/// One extracted segment.
+struct Segment {
+  int first = 0, last = 0;           ///< beam indices of the first and last inlier
+  double rho = 0.0, alpha = 0.0;     ///< line, sensor frame
+  double s_a = 0.0, s_b = 0.0;       ///< end points along t = (sin α, −cos α)
+  Eigen::Matrix4d C = Eigen::Matrix4d::Zero();  ///< covariance of (ρ, α, s_a, s_b)
+  line_segment::EndReason end_a = line_segment::EndReason::None;
+  line_segment::EndReason end_b = line_segment::EndReason::None;
+  Eigen::Matrix2Xd inliers;          ///< in beam order
+  double rms = 0.0;
+};
+
+/// Segments of a scan given as ranges and bearings in beam order (bearings
+/// increasing); a range outside [min_range, max_range] (e.g. 0) is no return.
+std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen::VectorXd& bearings,
+                                      const LineConfig& config);
+
+}  // namespace mspace::laser_lines

@@ -1,0 +1,228 @@
+// Tests of the `wall` feature type: B·B̃ = I at every dimension (eqs. 12,
+// 14, 15, Table II), Jacobians against central differences, the innovation,
+// conformance hooks (sample/save/restore/symmetry directions) and the life
+// cycle 0 → 2 → 3 → 4 with sliding end points.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <numbers>
+
+#include "mspace/measurements/line_segment2d.hpp"
+#include "mspace/pose.hpp"
+#include "mspace/transform.hpp"
+#include "wall_feature.hpp"
+
+namespace mspace::wall {
+namespace {
+
+namespace ls = line_segment;
+constexpr double kStep = 1e-6;
+
+const CoordLayout kLayout{BlockKind::Point2D, BlockKind::Point2D};
+
+Eigen::Vector4d some_wall() { return Eigen::Vector4d(1.0, 2.0, 4.0, 6.0); }
+
+TEST(Wall, ProjectionMatricesAreDualAtEveryDimension) {
+  const Eigen::Vector4d x = some_wall();
+  for (const std::vector<int>& ends : {std::vector<int>{}, {kStart}, {kEnd}, {kEnd, kStart}, {kStart, kEnd}}) {
+    const Eigen::MatrixXd B = wall_B(x, ends), Bd = wall_B_dual(x, ends);
+    ASSERT_EQ(B.rows(), 2 + static_cast<int>(ends.size()));
+    EXPECT_LT((B * Bd - Eigen::MatrixXd::Identity(B.rows(), B.rows())).norm(), 1e-12);
+  }
+  // Eq. 14 row 2 is the mean normal move: moving both points by γ gives √2.
+  const Eigen::Vector2d t = (x.tail<2>() - x.head<2>()).normalized(), gamma(t.y(), -t.x());
+  Eigen::Vector4d move;
+  move << gamma, gamma;
+  EXPECT_NEAR((wall_B(x, {}) * move)[1], std::numbers::sqrt2, 1e-12);
+  EXPECT_NEAR((wall_B(x, {}) * move)[0], 0.0, 1e-12);
+}
+
+TEST(Wall, PredictedLineJacobianMatchesCentralDifferences) {
+  const Eigen::Vector4d x_o(2.0, 1.5, 1.0, -2.5);
+  const PredictedLine p = predict_line(x_o);
+  Eigen::Matrix4d numeric;
+  for (int i = 0; i < 4; ++i) {
+    Eigen::Vector4d d = Eigen::Vector4d::Zero();
+    d[i] = kStep;
+    Eigen::Vector4d diff = predict_line(x_o + d).h - predict_line(x_o - d).h;
+    diff[1] = wrap_angle(diff[1]);
+    numeric.col(i) = diff / (2 * kStep);
+  }
+  EXPECT_LT((numeric - p.J).norm(), 1e-6) << p.J << "\n" << numeric;
+  // The line x = 2 − … : ρ̂ is the distance of the origin to the line.
+  const Eigen::Vector2d d = x_o.tail<2>() - x_o.head<2>();
+  EXPECT_NEAR(p.h[0], std::abs(d.x() * x_o[1] - d.y() * x_o[0]) / d.norm(), 1e-12);
+  EXPECT_GT(p.h[0], 0.0);
+}
+
+TEST(Wall, PlacementJacobiansMatchCentralDifferences) {
+  const Pose6 x_ms = make_pose2d(0.5, -1.0, 0.4);
+  const double rho = 3.0, alpha = 0.3;
+  const Eigen::Vector2d near1(0.0, 5.0), near2(5.0, 0.0);  // start first along t
+  auto place = [&](double r, double a, const Pose6& s) {
+    return place_on_line(r, a, s, near1, near2);
+  };
+  const Eigen::Vector4d x0 = place(rho, alpha, x_ms);
+  Eigen::Matrix2d J_v;
+  Eigen::Matrix<double, 2, 6> J_s;
+  line_placement_jacobians(x0, alpha, x_ms, J_v, J_s);
+  const Eigen::MatrixXd B = wall_B(x0, {});
+  for (int i = 0; i < 2; ++i) {
+    const double dr = i == 0 ? kStep : 0.0, da = i == 1 ? kStep : 0.0;
+    const Eigen::Vector2d col = B * (place(rho + dr, alpha + da, x_ms) - place(rho - dr, alpha - da, x_ms)) / (2 * kStep);
+    EXPECT_LT((col - J_v.col(i)).norm(), 1e-6) << "v column " << i;
+  }
+  for (int i : {kX, kY, kTheta}) {
+    Pose6 d = Pose6::Zero();
+    d[i] = kStep;
+    const Eigen::Vector2d col = B * (place(rho, alpha, x_ms + d) - place(rho, alpha, x_ms - d)) / (2 * kStep);
+    EXPECT_LT((col - J_s.col(i)).norm(), 1e-6) << "pose column " << i;
+  }
+}
+
+WallConfig quick_config() {
+  WallConfig c;
+  c.min_observations = 3;
+  c.min_points = 10;
+  c.min_length = 1.0;
+  c.min_end_observations = 2;
+  return c;
+}
+
+TEST(Wall, SampleIsConsistentAtEveryReachableDimension) {
+  const WallType type(quick_config());
+  for (int dim : type.reachable_dims()) {
+    for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+      auto s = type.sample(dim, seed);
+      ASSERT_TRUE(s);
+      const Feature& f = *s->feature;
+      ASSERT_EQ(f.mspace_dim(), dim);
+      EXPECT_LT((f.B() * f.B_dual() - Eigen::MatrixXd::Identity(dim, dim)).norm(), 1e-12);
+      Eigen::MatrixXd J_of;
+      const Eigen::VectorXd x_o = to_sensor_frame(kLayout, f.coords(), s->x_ms, &J_of);
+      Innovation in;
+      ASSERT_TRUE(f.innovation(x_o, s->measurement, in));
+      EXPECT_EQ(in.eta.size(), dim <= 2 ? 2 : dim);
+      EXPECT_LT(in.eta.norm(), 1e-9);
+      // J_ηo against central differences of the innovation.
+      for (int i = 0; i < 4; ++i) {
+        Eigen::VectorXd d = Eigen::VectorXd::Zero(4);
+        d[i] = kStep;
+        Innovation plus, minus;
+        ASSERT_TRUE(f.innovation(x_o + d, s->measurement, plus));
+        ASSERT_TRUE(f.innovation(x_o - d, s->measurement, minus));
+        EXPECT_LT(((plus.eta - minus.eta) / (2 * kStep) - in.J_eta_o.col(i)).norm(), 1e-6);
+      }
+      // Sliding along the symmetry directions changes no innovation.
+      const Eigen::MatrixXd sym = f.symmetry_directions();
+      EXPECT_EQ(sym.cols(), dim == 0 ? 2 : 4 - std::max(dim, 2));
+      for (Eigen::Index c = 0; c < sym.cols(); ++c) {
+        Innovation moved;
+        const Eigen::VectorXd x_moved = to_sensor_frame(kLayout, f.coords() + 0.2 * sym.col(c), s->x_ms);
+        ASSERT_TRUE(f.innovation(x_moved, s->measurement, moved));
+        EXPECT_LT((moved.eta - in.eta).norm(), 1e-9);
+      }
+      // Save / restore round trip.
+      const auto back = type.restore(f.save());
+      EXPECT_EQ(back->mspace_dim(), dim);
+      EXPECT_LT((back->coords() - f.coords()).norm(), 1e-15);
+      EXPECT_LT((back->B() - f.B()).norm(), 1e-15);
+    }
+  }
+  EXPECT_FALSE(type.sample(1, 1));
+}
+
+TEST(Wall, NotMatchedFromBehindOrWithoutOverlap) {
+  const WallType type(quick_config());
+  auto s = type.sample(2, 7);
+  const Feature& f = *s->feature;
+  Innovation in;
+  // From behind: mirror the sensor through the wall.
+  const Eigen::Vector2d p1 = f.coords().head<2>(), p2 = f.coords().tail<2>();
+  const Eigen::Vector2d t = (p2 - p1).normalized(), gamma(t.y(), -t.x());
+  Pose6 behind = s->x_ms;
+  const double dist = gamma.dot(s->x_ms.head<2>() - p1);
+  behind.head<2>() -= 2.0 * dist * gamma;
+  EXPECT_FALSE(f.innovation(to_sensor_frame(kLayout, f.coords(), behind), s->measurement, in));
+  // A segment far along the same line.
+  Measurement far = s->measurement;
+  far.v[ls::kSa] += 50.0;
+  far.v[ls::kSb] += 50.0;
+  EXPECT_FALSE(f.innovation(to_sensor_frame(kLayout, f.coords(), s->x_ms), far, in));
+}
+
+/// A measurement of the wall y = 3 (x from 0 to 6, seen from below: γ = (0, −1)),
+/// seen from the planar pose (x, 0, 0) with the visible part [lo, hi] in x.
+Measurement see_wall(double robot_x, double lo, double hi, std::uint32_t flags) {
+  const double rho = 3.0, alpha = std::numbers::pi / 2;  // u = (0, 1)
+  // t = (sin α, −cos α) = (1, 0): s along +x, relative to the robot.
+  Measurement m;
+  m.kind = ls::kKind;
+  m.v = Eigen::Vector4d(rho, alpha, lo - robot_x, hi - robot_x);
+  m.C_v = Eigen::Vector4d(1e-4, 1e-5, 1e-3, 1e-3).asDiagonal();
+  m.flags = flags;
+  const int n = 20;
+  m.dense.resize(2, n);
+  for (int i = 0; i < n; ++i) m.dense.col(i) << lo - robot_x + (hi - lo) * i / (n - 1), rho;
+  return m;
+}
+
+SensorView view_at(double x, double t) {
+  SensorView v;
+  v.t = t;
+  v.x_ms = make_pose2d(x, 0.0, 0.0);
+  v.C_ms = Mat6::Identity() * 1e-4;
+  v.path_distance = x;
+  return v;
+}
+
+TEST(Wall, LifeCycleGrowsMspaceAndSlidesEnds) {
+  WallType type(quick_config());
+  const std::uint32_t start_real = ls::make_flags(ls::EndReason::Depth, ls::EndReason::Fov);
+  const std::uint32_t both_real = ls::make_flags(ls::EndReason::Corner, ls::EndReason::Depth);
+  auto f = type.create(see_wall(0.0, 0.0, 2.0, start_real), view_at(0.0, 0.0));
+  ASSERT_TRUE(f);
+  f->add_dense_information(see_wall(0.0, 0.0, 2.0, start_real), view_at(0.0, 0.0));
+  EXPECT_EQ(f->mspace_dim(), 0);
+  EXPECT_FALSE(f->extend(view_at(0.0, 0.0)));  // one observation
+  EXPECT_EQ(f->gating_covariance().rows(), 4);
+  f->add_dense_information(see_wall(0.5, 0.0, 3.0, start_real), view_at(0.5, 1.0));
+  f->add_dense_information(see_wall(1.0, 0.0, 4.0, start_real), view_at(1.0, 2.0));
+  const auto ext = f->extend(view_at(1.0, 2.0));
+  ASSERT_TRUE(ext);
+  EXPECT_EQ(ext->new_dims, 2);
+  EXPECT_EQ(f->mspace_dim(), 2);
+  EXPECT_EQ(f->gating_covariance().size(), 0);
+  EXPECT_NEAR(f->coords()[1], 3.0, 1e-12);
+  EXPECT_NEAR(f->coords()[3], 3.0, 1e-12);
+  // The start was seen as real 3 times within 0 m: it enters at once (dim 3).
+  const auto ext3 = f->extend(view_at(1.0, 2.0));
+  ASSERT_TRUE(ext3);
+  EXPECT_EQ(ext3->new_dims, 1);
+  EXPECT_EQ(f->mspace_dim(), 3);
+  EXPECT_NEAR(f->coords()[0], 0.0, 1e-12);
+  // The end slides outwards with the observed extent; the line does not move.
+  f->add_dense_information(see_wall(2.0, 0.0, 5.5, start_real), view_at(2.0, 3.0));
+  EXPECT_NEAR(f->coords()[2], 5.5, 1e-12);
+  EXPECT_NEAR(f->coords()[3], 3.0, 1e-12);
+  EXPECT_NEAR(f->coords()[0], 0.0, 1e-12);
+  // The far end becomes real (corner at x = 6) twice → dim 4.
+  f->add_dense_information(see_wall(3.0, 0.0, 6.0, both_real), view_at(3.0, 4.0));
+  EXPECT_FALSE(f->extend(view_at(3.0, 4.0)));  // once so far
+  f->add_dense_information(see_wall(3.5, 0.0, 6.0, both_real), view_at(3.5, 5.0));
+  const auto ext4 = f->extend(view_at(3.5, 5.0));
+  ASSERT_TRUE(ext4);
+  EXPECT_EQ(f->mspace_dim(), 4);
+  EXPECT_NEAR(f->coords()[2], 6.0, 1e-12);
+  // Measured ends now add innovation rows.
+  WallFeature& w = dynamic_cast<WallFeature&>(*f);
+  Innovation in;
+  const Measurement m = see_wall(3.5, 0.0, 6.0, both_real);
+  ASSERT_TRUE(w.innovation(to_sensor_frame(kLayout, w.coords(), view_at(3.5, 5.0).x_ms), m, in));
+  EXPECT_EQ(in.eta.size(), 4);
+  EXPECT_LT(in.eta.norm(), 1e-9);
+}
+
+}  // namespace
+}  // namespace mspace::wall
