@@ -26,10 +26,11 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 /// Pose entries 3..5 (θ, φ, ψ) are angles: degrees in YAML, radians inside.
 constexpr int kFirstAngle = kTheta;
 
-const std::vector<std::string> kTopKeys = {"run",     "source",      "motion",       "estimator", "features",
-                                           "sensors", "association", "initial_pose", "output"};
+const std::vector<std::string> kTopKeys = {"run",         "source",       "motion", "estimator", "features", "sensors",
+                                           "association", "initial_pose", "output", "evaluation"};
+const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor"};
 const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "plugin_path", "seed"};
-const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds"};
+const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
                                                    "join_distance"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
@@ -155,6 +156,7 @@ class Reader {
   AssociationConfig read_association(const Item* item) const;
   void read_initial_pose(const Item* item, RunConfig& config) const;
   OutputConfig read_output(const Item* item, const std::string& run_name) const;
+  EvaluationConfig read_evaluation(const Item* item, const std::vector<SensorConfig>& sensors) const;
 
   std::string file_;
   PluginRegistry& registry_;
@@ -305,6 +307,16 @@ Params Reader::params(const Item& item, const std::vector<Item>& fields, const P
     return nullptr;
   };
   Params values = Params::defaults(d.params);
+  // A plugin's default may name environment variables too, e.g. a data path
+  // "${MSPACE_DATA:-../shared/datasets}/…": expand them like YAML values.
+  for (const ParamSpec& spec : d.params) {
+    if (spec.type != ParamType::String || spec.required) continue;
+    try {
+      values.set(spec.name, expand_env_vars(std::get<std::string>(spec.default_value)));
+    } catch (const std::invalid_argument& e) {
+      fail(item.key_mark, item.key + "." + spec.name, std::string("default of plugin '") + d.name + "': " + e.what());
+    }
+  }
   for (Item field : fields) {
     if (field.name == "plugin") continue;
     const ParamSpec* spec = spec_of(field.name);
@@ -399,6 +411,7 @@ SensorConfig Reader::read_sensor(const Item& item, const std::vector<std::string
   sensor.mount = pose(need(item, fields, "mount"));
   sensor.extractor = instance(need(item, fields, "extractor"), sensor.name, PluginKind::Extractor);
   sensor.feeds = read_feeds(need(item, fields, "feeds"), feature_names);
+  if (const Item* f = find(fields, "max_range")) sensor.max_range = number(*f, 0.0);
   return sensor;
 }
 
@@ -435,6 +448,25 @@ OutputConfig Reader::read_output(const Item* item, const std::string& run_name) 
   return output;
 }
 
+EvaluationConfig Reader::read_evaluation(const Item* item, const std::vector<SensorConfig>& sensors) const {
+  EvaluationConfig evaluation;
+  if (item == nullptr) return evaluation;
+  const std::vector<Item> fields = entries(*item, &kEvaluationKeys);
+  if (const Item* f = find(fields, "relations")) {
+    evaluation.relations = text(*f);
+    if (!std::filesystem::is_regular_file(evaluation.relations)) fail(*f, "no such file '" + evaluation.relations + "'");
+  }
+  if (const Item* f = find(fields, "relations_max_dt")) evaluation.relations_max_dt = number(*f, 0.0);
+  if (const Item* f = find(fields, "ground_truth_sensor")) {
+    evaluation.ground_truth_sensor = text(*f);
+    std::vector<std::string> names;
+    for (const SensorConfig& sensor : sensors) names.push_back(sensor.name);
+    if (std::find(names.begin(), names.end(), evaluation.ground_truth_sensor) == names.end())
+      fail(*f, "no sensor named '" + evaluation.ground_truth_sensor + "' (sensors: " + join(names) + ")");
+  }
+  return evaluation;
+}
+
 RunConfig Reader::read_document(const YAML::Node& root) {
   const YAML::Mark start = root.Mark();
   if (!root.IsMap())
@@ -460,6 +492,7 @@ RunConfig Reader::read_document(const YAML::Node& root) {
   config.association = read_association(find(sections, "association"));
   read_initial_pose(find(sections, "initial_pose"), config);
   config.output = read_output(find(sections, "output"), config.name);
+  config.evaluation = read_evaluation(find(sections, "evaluation"), config.sensors);
   return config;
 }
 
@@ -531,6 +564,7 @@ void emit_sensors(YAML::Emitter& out, const std::vector<SensorConfig>& sensors) 
     emit_instance_body(out, s.extractor);
     out << YAML::Key << "feeds" << YAML::Value;
     emit_string_list(out, s.feeds);
+    out << YAML::Key << "max_range" << YAML::Value << format_number(s.max_range);
     out << YAML::EndMap;
   }
   out << YAML::EndMap;
@@ -559,6 +593,17 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "picture" << YAML::Value << yes_no(c.output.picture);
   out << YAML::Key << "picture_size" << YAML::Value << std::to_string(c.output.picture_size);
   out << YAML::EndMap;
+
+  if (!c.evaluation.relations.empty() || !c.evaluation.ground_truth_sensor.empty()) {
+    out << YAML::Key << "evaluation" << YAML::Value << YAML::BeginMap;
+    if (!c.evaluation.relations.empty()) {
+      out << YAML::Key << "relations" << YAML::Value << c.evaluation.relations;
+      out << YAML::Key << "relations_max_dt" << YAML::Value << format_number(c.evaluation.relations_max_dt);
+    }
+    if (!c.evaluation.ground_truth_sensor.empty())
+      out << YAML::Key << "ground_truth_sensor" << YAML::Value << c.evaluation.ground_truth_sensor;
+    out << YAML::EndMap;
+  }
 }
 
 }  // namespace

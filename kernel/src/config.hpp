@@ -13,10 +13,12 @@
 //       mount: [x, y, z, theta, phi, psi]   # required; x_rs, angles in degrees
 //       extractor: {plugin: <name>, <parameters>}                       # required
 //       feeds: [<feature instances>]                                    # required
+//       max_range: 0 (m; features farther away are not associated; 0 = no limit)
 //   association:  {gate_probability: 0.99, new_feature_probability: 0.9999, tentative_max_age: 20,
 //                  join_distance: 0 (m; 0 = no shared coordinates)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
 //   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000}
+//   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>}
 //
 // Plugin parameters are checked against the plugin's descriptor (loaded
 // through the registry) and completed with their defaults. String values may
@@ -58,6 +60,9 @@ struct SensorConfig {
   Pose6 mount = Pose6::Zero();     ///< x_rs: sensor pose on the robot (radians)
   InstanceConfig extractor;        ///< instance name = sensor name
   std::vector<std::string> feeds;  ///< feature instances its measurements go to
+  /// Features farther than this (m) from the sensor are not considered for
+  /// association; 0 = no limit.
+  double max_range = 0.0;
 };
 
 struct AssociationConfig {
@@ -67,6 +72,17 @@ struct AssociationConfig {
   /// Shared coordinates (T-RO §VI): blocks of two features closer than this
   /// (m) may be merged into one shared coordinate; 0 turns sharing off.
   double join_distance = 0.0;
+};
+
+/// Extra references a run is scored against (in the summary).
+struct EvaluationConfig {
+  /// Relations file (`t1 t2 x y z roll pitch yaw`, Kümmerle et al. 2009); empty: none.
+  std::string relations;
+  /// Largest |Δt| (s) between a relation's time stamp and a trajectory pose.
+  double relations_max_dt = 1e-4;
+  /// Ground truth is the pose of this sensor (x_r ⊕ x_rs), e.g. a GPS antenna
+  /// mounted with the laser; empty: the robot pose itself.
+  std::string ground_truth_sensor;
 };
 
 struct OutputConfig {
@@ -89,6 +105,7 @@ struct RunConfig {
   Pose6 initial_pose = Pose6::Zero();                                               ///< radians
   Eigen::Matrix<double, 6, 1> initial_sigma = Eigen::Matrix<double, 6, 1>::Zero();  ///< radians for angles
   OutputConfig output;
+  EvaluationConfig evaluation;
 };
 
 /// Reads and validates a run file. Directories of run.plugin_path are added to

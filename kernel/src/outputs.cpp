@@ -54,10 +54,14 @@ RunSummary summarize(const Slam& slam, double wall_seconds) {
     ++s.features_by_dim[slam.feature_types()[f.type].instance][f.feature->mspace_dim()];
     s.state_dimension += static_cast<int>(f.own_idx.size());
   }
+  s.skipped_records = slam.skipped_records();
+  if (!slam.config().evaluation.relations.empty())
+    s.relations = evaluate_relations(traj, read_relations(slam.config().evaluation.relations),
+                                     slam.config().evaluation.relations_max_dt);
   if (!slam.ground_truth().empty()) {
     // Reference poses are paired with the estimate interpolated at their
     // time, as long as the estimate has poses less than a second apart.
-    s.errors = evaluate_trajectory(traj, slam.ground_truth(), 1.0);
+    s.errors = evaluate_trajectory(slam.evaluated_trajectory(), slam.ground_truth(), 1.0);
     const auto& nees = slam.stats().nees;
     double sum = 0.0;
     for (double v : nees) sum += v;
@@ -157,6 +161,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "shared_coordinates" << YAML::Value << st.joined;
   y << YAML::Key << "tentative_pruned" << YAML::Value << st.pruned;
   y << YAML::Key << "readings_without_sensor" << YAML::Value << st.unknown_channel_readings;
+  y << YAML::Key << "skipped_input_records" << YAML::Value << s.skipped_records;
   y << YAML::EndMap;
   y << YAML::Key << "features" << YAML::Value << YAML::BeginMap;
   for (const auto& [type, by_dim] : s.features_by_dim) {
@@ -184,6 +189,24 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     if (e.final_heading) y << YAML::Key << "final_heading_error_deg" << YAML::Value << *e.final_heading * kRadToDeg;
     y << YAML::Key << "mean_robot_nees" << YAML::Value << s.mean_nees;
     y << YAML::Key << "nees_dof" << YAML::Value << s.nees_dof;
+    y << YAML::EndMap;
+  }
+  if (s.relations) {
+    const RelationErrors& r = *s.relations;
+    y << YAML::Key << "relations" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "file" << YAML::Value << slam.config().evaluation.relations;
+    y << YAML::Key << "given" << YAML::Value << r.total;
+    y << YAML::Key << "matched" << YAML::Value << r.matched;
+    y << YAML::Key << "translation_m" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
+      << YAML::Value << r.translation.mean << YAML::Key << "std" << YAML::Value << r.translation.std << YAML::EndMap;
+    y << YAML::Key << "translation_squared_m2" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
+      << YAML::Value << r.translation_sq.mean << YAML::Key << "std" << YAML::Value << r.translation_sq.std
+      << YAML::EndMap;
+    y << YAML::Key << "rotation_deg" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
+      << YAML::Value << r.rotation_deg.mean << YAML::Key << "std" << YAML::Value << r.rotation_deg.std << YAML::EndMap;
+    y << YAML::Key << "rotation_squared_deg2" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
+      << YAML::Value << r.rotation_sq_deg.mean << YAML::Key << "std" << YAML::Value << r.rotation_sq_deg.std
+      << YAML::EndMap;
     y << YAML::EndMap;
   }
   y << YAML::EndMap;
@@ -222,6 +245,13 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     if (e.final_heading) os << " / " << std::setprecision(2) << *e.final_heading * kRadToDeg << " deg";
     os << std::setprecision(3) << ", mean robot NEES " << s.mean_nees << " (" << s.nees_dof << " dof)\n";
   }
+  if (s.relations) {
+    const RelationErrors& r = *s.relations;
+    os << "  relations (" << r.matched << " of " << r.total << " matched): translation " << r.translation.mean
+       << " ± " << r.translation.std << " m, rotation " << std::setprecision(2) << r.rotation_deg.mean << " ± "
+       << r.rotation_deg.std << " deg" << std::setprecision(3) << "\n";
+  }
+  if (s.skipped_records > 0) os << "  skipped malformed input records: " << s.skipped_records << "\n";
   return os.str();
 }
 

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "evaluation.hpp"
+#include "relations.hpp"
 
 namespace mspace::kernel {
 
@@ -27,6 +28,8 @@ struct RunSummary {
   std::optional<TrajectoryErrors> errors;  ///< when the source gave ground truth
   double mean_nees = 0.0;
   int nees_dof = 0;
+  std::optional<RelationErrors> relations;  ///< when the configuration names a relations file
+  std::size_t skipped_records = 0;          ///< malformed input records the source skipped
 };
 
 RunSummary summarize(const Slam& slam, double wall_seconds);

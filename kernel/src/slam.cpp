@@ -40,6 +40,30 @@ void require_finite(const Eigen::MatrixXd& m, const char* what, const std::strin
   throw PluginError(os.str());
 }
 
+/// Horizontal distance from p to the nearest point of the polyline through
+/// the feature's point blocks (a point, a segment, …); 0 without any.
+double planar_distance(const Feature& f, const Eigen::Vector2d& p) {
+  const CoordLayout& layout = f.layout();
+  double best = std::numeric_limits<double>::infinity();
+  bool any = false;
+  Eigen::Vector2d previous;
+  for (int b = 0; b < layout.num_blocks(); ++b) {
+    if (layout.kind(b) == BlockKind::Scalar) continue;
+    const Eigen::Vector2d q = f.coords().segment<2>(layout.offset(b));
+    if (!any) {
+      best = (q - p).norm();
+    } else {
+      const Eigen::Vector2d d = q - previous;
+      const double len2 = d.squaredNorm();
+      const double s = len2 > 0.0 ? std::clamp((p - previous).dot(d) / len2, 0.0, 1.0) : 0.0;
+      best = std::min(best, (previous + s * d - p).norm());
+    }
+    previous = q;
+    any = true;
+  }
+  return any ? best : 0.0;
+}
+
 Eigen::MatrixXd columns(const Eigen::MatrixXd& m, const std::vector<int>& cols) {
   Eigen::MatrixXd out(m.rows(), static_cast<Eigen::Index>(cols.size()));
   for (std::size_t j = 0; j < cols.size(); ++j) out.col(static_cast<Eigen::Index>(j)) = m.col(cols[j]);
@@ -107,6 +131,9 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry) : config_(config) 
     sensors_.push_back(std::move(slot));
   }
 
+  for (std::size_t i = 0; i < sensors_.size(); ++i)
+    if (sensors_[i].config.name == config_.evaluation.ground_truth_sensor) ground_truth_sensor_ = static_cast<int>(i);
+
   dofs_ = guarded(config_.motion.instance, *motion_lib_, "estimated_dofs",
                   [&] { return motion_->estimated_dofs(); });
   if (dofs_.empty() || !std::is_sorted(dofs_.begin(), dofs_.end()) || dofs_.front() < 0 || dofs_.back() > 5)
@@ -138,6 +165,8 @@ std::size_t Slam::size_hint() const {
 }
 
 Eigen::MatrixXd Slam::true_landmarks() const { return source_->true_landmarks(); }
+
+std::size_t Slam::skipped_records() const { return source_->skipped_records(); }
 
 Eigen::MatrixXd Slam::robot_covariance() const { return estimator_->marginal(robot_idx_); }
 
@@ -289,11 +318,13 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
   std::vector<Candidate> candidates;
   // Per measurement: min over features of d² / (new-feature threshold).
   std::vector<double> closest(meas.size(), std::numeric_limits<double>::infinity());
+  const Eigen::Vector2d sensor_xy(x_ms[kX], x_ms[kY]);
   for (std::size_t fi = 0; fi < features_.size(); ++fi) {
     const MapFeature& mf = features_[fi];
     if (std::find(sensor.feeds.begin(), sensor.feeds.end(), mf.type) == sensor.feeds.end()) continue;
     const FeatureTypeSlot& type = types_[mf.type];
     const Feature& f = *mf.feature;
+    if (sensor.config.max_range > 0.0 && planar_distance(f, sensor_xy) > sensor.config.max_range) continue;
     const CoordLayout& layout = f.layout();
     Eigen::MatrixXd J_of, J_os;
     const Eigen::VectorXd x_o = to_sensor_frame(layout, f.coords(), x_ms, &J_of, &J_os);  // eqs. 7–9, 18
@@ -682,17 +713,30 @@ void Slam::prune_tentative() {
 
 void Slam::record(const DataStep& data) {
   trajectory_.push_back({data.t, x_r_, kAllPoseCoords});
+  // The frame the ground truth refers to: the robot, or a sensor on it
+  // (e.g. a GPS antenna mounted with the laser), x_r ⊕ x_rs (eq. 17).
+  Mat6 J_sr = Mat6::Identity();
+  Pose6 x_eval = x_r_;
+  if (ground_truth_sensor_ >= 0) x_eval = compound(x_r_, sensors_[ground_truth_sensor_].config.mount, &J_sr);
+  evaluated_.push_back({data.t, x_eval, kAllPoseCoords});
   if (!data.ground_truth) return;
   ground_truth_.push_back({data.t, *data.ground_truth, data.ground_truth_known});
-  // Robot NEES over the estimated coordinates the ground truth knows.
+
+  // NEES over the coordinates the ground truth knows and the filter estimates.
+  const Eigen::MatrixXd J = columns(J_sr, dofs_);
+  const Eigen::MatrixXd P6 = J * estimator_->marginal(robot_idx_) * J.transpose();
   std::vector<int> rows;
-  for (std::size_t i = 0; i < dofs_.size(); ++i)
-    if (data.ground_truth_known & (1u << dofs_[i])) rows.push_back(static_cast<int>(i));
+  for (int i = 0; i < 6; ++i)
+    if ((data.ground_truth_known & (1u << i)) && P6(i, i) > 0.0) rows.push_back(i);
   if (rows.empty()) return;
-  const Pose6 err = pose_difference(x_r_, *data.ground_truth);
+  const Pose6 err = pose_difference(x_eval, *data.ground_truth);
   Eigen::VectorXd e(static_cast<Eigen::Index>(rows.size()));
-  for (std::size_t i = 0; i < rows.size(); ++i) e[static_cast<Eigen::Index>(i)] = err[dofs_[rows[i]]];
-  const Eigen::MatrixXd P = estimator_->marginal(rows);
+  Eigen::MatrixXd P(e.size(), e.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    e[static_cast<Eigen::Index>(i)] = err[rows[i]];
+    for (std::size_t j = 0; j < rows.size(); ++j)
+      P(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = P6(rows[i], rows[j]);
+  }
   const Eigen::LDLT<Eigen::MatrixXd> ldlt(P);
   if (ldlt.info() == Eigen::Success && (ldlt.vectorD().array() > 0.0).all()) {
     stats_.nees.push_back(e.dot(ldlt.solve(e)));

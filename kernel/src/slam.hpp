@@ -121,6 +121,9 @@ class Slam {
   const std::vector<int>& robot_dofs() const { return dofs_; }
   const std::vector<StampedPose>& trajectory() const { return trajectory_; }
   const std::vector<StampedPose>& ground_truth() const { return ground_truth_; }
+  /// The poses compared with the ground truth: the robot's, or those of
+  /// evaluation.ground_truth_sensor.
+  const std::vector<StampedPose>& evaluated_trajectory() const { return evaluated_; }
   const std::vector<MapFeature>& features() const { return features_; }
   const std::vector<SharedCoordinate>& shared_coordinates() const { return shared_; }
   const std::vector<FeatureTypeSlot>& feature_types() const { return types_; }
@@ -133,6 +136,8 @@ class Slam {
   const RunStats& stats() const { return stats_; }
   std::size_t size_hint() const;
   Eigen::MatrixXd true_landmarks() const;
+  /// Malformed records the data source skipped.
+  std::size_t skipped_records() const;
 
  private:
   struct Candidate;
@@ -184,6 +189,8 @@ class Slam {
   Eigen::LDLT<Eigen::MatrixXd> scratch_ldlt_;
   std::vector<StampedPose> trajectory_;
   std::vector<StampedPose> ground_truth_;
+  std::vector<StampedPose> evaluated_;
+  int ground_truth_sensor_ = -1;
   RunStats stats_;
 };
 

@@ -213,6 +213,41 @@ TEST_F(SimRun, WritesTrajectoryMapSummaryAndPicture) {
   EXPECT_EQ(std::string(signature + 1, 3), "PNG");
 }
 
+// The evaluation section is checked like every other key.
+TEST_F(SimRun, GroundTruthSensorMustNameASensor) {
+  std::ifstream in(kConfig);
+  std::stringstream text;
+  text << in.rdbuf() << "\nevaluation:\n  ground_truth_sensor: gps\n";
+  try {
+    parse_config(text.str(), "sim.yaml", registry_);
+    FAIL() << "expected a ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("evaluation.ground_truth_sensor: no sensor named 'gps' (sensors: laser)"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// Evaluating at a sensor: the estimate is compared as x_r ⊕ x_rs. The
+// simulator's ground truth is the robot origin, so with a sensor mounted
+// 0.5 m ahead the robot-frame ATE stays small and the sensor-frame ATE shows
+// the 0.5 m lever arm: it points along the changing heading, so alignment can
+// absorb only its mean over the path — what is left lies between half of it and
+// all of it (plus the robot's own error).
+TEST_F(SimRun, GroundTruthAtASensorUsesItsMount) {
+  RunConfig c = config();
+  c.max_steps = 1200;
+  c.source.params.set("sensor_mount", std::vector<double>{0.5, 0, 0, 0, 0, 0});
+  c.sensors[0].mount = make_pose(0.5, 0, 0, 0, 0, 0);
+  const RunResult at_robot = run(c);
+  c.evaluation.ground_truth_sensor = "laser";
+  const RunResult at_sensor = run(c);
+  ASSERT_TRUE(at_sensor.summary.errors && at_robot.summary.errors);
+  EXPECT_LT(at_robot.summary.errors->ate_rmse, 0.15);
+  EXPECT_GT(at_sensor.summary.errors->ate_rmse, 0.25);
+  EXPECT_LT(at_sensor.summary.errors->ate_rmse, 0.5 + at_robot.summary.errors->ate_rmse);
+}
+
 // A plugin that hands back NaN stops the run with an error naming the
 // instance and the plugin, and the steps computed before are not lost.
 TEST_F(SimRun, NanFromAPluginIsAnErrorAndKeepsWhatWasComputed) {

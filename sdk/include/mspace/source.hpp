@@ -39,6 +39,9 @@ class DataSource : public PluginObject {
   virtual std::size_t size_hint() const { return 0; }
   /// Initial robot pose in the map frame.
   virtual Pose6 initial_pose() const { return Pose6::Zero(); }
+  /// Malformed records skipped so far (when the source is configured to skip
+  /// rather than fail); reported in the run summary.
+  virtual std::size_t skipped_records() const { return 0; }
   /// Ground-truth landmark positions if known (3 × N), for pictures only.
   virtual Eigen::MatrixXd true_landmarks() const { return {}; }
 };
