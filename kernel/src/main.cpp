@@ -3,6 +3,7 @@
 //   mspace run [CONFIG] [--out DIR]   a SLAM run (the built-in simulated world without CONFIG)
 //   mspace plugins                    every plugin found, with kind, ABI tag and parameters
 //   mspace config [CONFIG]            the fully resolved configuration
+//   mspace check PLUGIN... [--junit F] the plugin conformance suite (files or names)
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
@@ -12,6 +13,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "check.hpp"
 #include "config.hpp"
 #include "default_config.hpp"
 #include "logging.hpp"
@@ -140,11 +142,24 @@ int main(int argc, char** argv) {
   config->add_option("config", config_file, "YAML run configuration (the built-in one without)");
   add_common(config, common);
 
+  CheckCommand check_cmd;
+  CLI::App* check = app.add_subcommand("check", "run the conformance suite on plugin files or names");
+  check->add_option("plugins", check_cmd.targets, "plugin library files or registered names")->required();
+  check->add_option("--junit", check_cmd.junit_file, "also write JUnit XML to this file");
+  check->add_option("--samples", check_cmd.samples, "random samples per check")->check(CLI::PositiveNumber);
+  check->add_option("--seed", check_cmd.seed, "base seed of the samples");
+  add_common(check, common);
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, seed, quiet, common);
     if (plugins->parsed()) return cmd_plugins(common);
     if (config->parsed()) return cmd_config(config_file, common);
+    if (check->parsed()) {
+      PluginRegistry registry;
+      setup_registry(registry, common);
+      return run_check(check_cmd, registry, std::cout);
+    }
   } catch (const std::exception& e) {
     std::cerr << "mspace: error: " << e.what() << "\n";
     return 1;

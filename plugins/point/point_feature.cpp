@@ -3,6 +3,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <random>
 #include <stdexcept>
 
 #include "mspace/pose.hpp"
@@ -82,6 +83,12 @@ PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& v,
     : config_(config) {
   mdim_ = 0;
   place_at(v, C_v, view);
+}
+
+PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& x_f, int mspace_dim)
+    : config_(config) {
+  x_ = x_f;
+  mdim_ = mspace_dim;
 }
 
 const CoordLayout& PointFeature::layout() const { return point_layout(); }
@@ -196,6 +203,40 @@ std::unique_ptr<Feature> PointType::create(const Measurement& m, const SensorVie
   const Eigen::Vector3d v = m.v;
   if (!is_placeable(v)) return nullptr;
   return std::make_unique<PointFeature>(config_, v, m.C_v, view);
+}
+
+// ---------------------------------------------------------------- conformance
+
+std::optional<FeatureSample> PointType::sample(int dim, std::uint64_t seed) const {
+  if (dim != 0 && dim != kDim) return std::nullopt;
+  std::mt19937_64 rng(seed);
+  auto uniform = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  FeatureSample s;
+  s.x_ms = make_pose(uniform(-10, 10), uniform(-10, 10), uniform(0, 1), uniform(-3, 3), uniform(-0.2, 0.2),
+                     uniform(-0.2, 0.2));
+  const Eigen::Vector3d v(uniform(2, 8), uniform(-1.5, 1.5), uniform(-0.4, 0.4));
+  s.measurement.kind = kRangeBearingElevation;
+  s.measurement.v = v;
+  s.measurement.C_v = Eigen::Vector3d(0.05 * 0.05, 0.01 * 0.01, 0.02 * 0.02).asDiagonal();
+  if (dim == 0) {
+    SensorView view;
+    view.x_ms = s.x_ms;
+    view.C_ms = Mat6::Identity() * 1e-4;
+    s.feature = std::make_unique<PointFeature>(config_, v, s.measurement.C_v, view);
+  } else {
+    s.feature = std::make_unique<PointFeature>(config_, back_project(v, s.x_ms).x_f, kDim);
+  }
+  return s;
+}
+
+std::unique_ptr<Feature> PointType::restore(const SavedFeature& saved) const {
+  if (saved.coords.size() != kDim || !saved.coords.allFinite() || (saved.mspace_dim != 0 && saved.mspace_dim != kDim) ||
+      saved.extra.size() != 0) {
+    throw std::invalid_argument("point: restore needs 3 finite coordinates, dimension 0 or 3 and no extra state (got " +
+                                std::to_string(saved.coords.size()) + " coordinates, dimension " +
+                                std::to_string(saved.mspace_dim) + ")");
+  }
+  return std::make_unique<PointFeature>(config_, Eigen::Vector3d(saved.coords), saved.mspace_dim);
 }
 
 }  // namespace mspace::point

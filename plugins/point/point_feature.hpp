@@ -25,6 +25,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <deque>
 #include <memory>
 #include <optional>
@@ -82,6 +83,9 @@ class PointFeature : public Feature {
   /// add_dense_information right after creation).
   PointFeature(const PointConfig& config, const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v,
                const SensorView& view);
+  /// A point at x_f with M-space dimension 0 or 3 and no stored
+  /// observations (map files, FeatureType::restore).
+  PointFeature(const PointConfig& config, const Eigen::Vector3d& x_f, int mspace_dim);
 
   const CoordLayout& layout() const override;
 
@@ -140,6 +144,17 @@ class PointType : public FeatureType {
   /// nullptr for other kinds, malformed or non-finite measurements, a
   /// range ≤ 0, or a point within kMinAxisDistance of the sensor's z axis.
   std::unique_ptr<Feature> create(const Measurement& m, const SensorView& view) override;
+
+  /// Conformance sample: a sensor pose with a small tilt, a point 2–8 m away
+  /// in its field of view and the noise-free measurement of it (C_v of the
+  /// default range_bearing extractor). dim 0: a tentative point created from
+  /// that measurement; dim 3: an initialised point. std::nullopt for other dims.
+  std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const override;
+  /// A point from SavedFeature (3 coordinates, dim 0 or 3, no extra state);
+  /// throws std::invalid_argument otherwise. The point's own Feature::save()
+  /// is the default one: a point has no state beyond x_f and its dimension
+  /// (and no symmetry directions: every coordinate is measured).
+  std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
 
   const PointConfig& config() const { return config_; }
 

@@ -2,8 +2,18 @@
 #
 # Builds the plugin library `libmspace-plugin-<name>.so` with the flags the
 # kernel expects: a MODULE library, hidden visibility (only the two symbols of
-# MSPACE_EXPORT_PLUGIN are exported), C++20 and the SDK's Eigen settings. The
+# MSPACE_EXPORT_PLUGIN are exported), C++20 and the SDK's Eigen settings
+# (through mspace::sdk; the ABI tag embedded by MSPACE_EXPORT_PLUGIN lets the
+# kernel refuse a plugin built with another SDK, compiler or Eigen). The
 # target is called `mspace_plugin_<name>`.
+#
+# Variables read (all optional):
+#   MSPACE_PLUGIN_OUTPUT_DIR   folder for the library (e.g. one folder to point
+#                              `mspace --plugin-dir` or MSPACE_PLUGIN_PATH at)
+#   MSPACE_PLUGIN_INSTALL_DIR  if set, the plugin is installed there with an
+#                              RPATH to the SDK two levels up (in-tree plugins:
+#                              lib/mspace/plugins → lib)
+# Out of tree: find_package(mspace CONFIG REQUIRED) includes this file.
 function(mspace_add_plugin)
   cmake_parse_arguments(ARG "" "NAME" "SOURCES;LINK" ${ARGN})
   if(NOT ARG_NAME OR NOT ARG_SOURCES)

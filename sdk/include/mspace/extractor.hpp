@@ -1,6 +1,8 @@
 // mspace/extractor.hpp — sensor extractors: raw readings → typed measurements.
 #pragma once
 
+#include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,6 +25,12 @@ class Extractor : public PluginObject {
  public:
   /// Appends the measurements found in `reading` to `out`.
   virtual void extract(const SensorReading& reading, std::vector<Measurement>& out) = 0;
+
+  /// Conformance support (`mspace check`): a typical valid reading drawn
+  /// deterministically from `seed`, so the suite can check the measurements
+  /// (finite, symmetric positive-definite C_v, deterministic). The default
+  /// (std::nullopt) limits the suite to the checks that need no reading.
+  virtual std::optional<SensorReading> sample_reading(std::uint64_t /*seed*/) const { return std::nullopt; }
 };
 
 }  // namespace mspace

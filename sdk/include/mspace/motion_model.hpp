@@ -27,6 +27,11 @@ class MotionModel : public PluginObject {
   virtual std::vector<int> estimated_dofs() const = 0;
   /// Predicts from the previous pose and the increment x_d over dt seconds.
   virtual MotionPrediction predict(const Pose6& x_r, const Eigen::VectorXd& x_d, double dt) const = 0;
+
+  /// Conformance support (`mspace check`): the length d of the increment x_d
+  /// predict() expects. The default assumes an increment of the estimated
+  /// pose coordinates (e.g. odometry (dx, dy, dθ) for a planar robot).
+  virtual int increment_size() const { return static_cast<int>(estimated_dofs().size()); }
 };
 
 }  // namespace mspace

@@ -1,0 +1,85 @@
+// check.cpp — see check.hpp.
+#include "check.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <ostream>
+#include <stdexcept>
+
+#include "mspace/conformance.hpp"
+#include "plugin_registry.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// A report for a target the suite could not even load.
+conformance::Report load_failure(const std::string& target, const std::string& message) {
+  conformance::Report report;
+  report.plugin = target;
+  report.kind = "?";
+  conformance::CheckResult c;
+  c.name = "load";
+  c.worst = 1;
+  c.passed = false;
+  c.note = message;
+  report.checks.push_back(c);
+  return report;
+}
+
+/// The registered name of `target`, loading it first when it is a file.
+std::string resolve(const std::string& target, PluginRegistry& registry) {
+  std::error_code ec;
+  if (!fs::is_regular_file(target, ec)) return target;
+  const std::string name = plugin_name_of_file(target);
+  if (name.empty()) throw PluginError("'" + target + "' is not named libmspace-plugin-<name>.so");
+  registry.add_plugin_file(target);
+  return name;
+}
+
+conformance::Report check_target(const std::string& target, PluginRegistry& registry,
+                                 const conformance::Options& options) {
+  try {
+    // `plugin` keeps the library loaded until every object of the check is gone.
+    const std::shared_ptr<const LoadedPlugin> plugin = registry.load(resolve(target, registry));
+    return conformance::check_plugin(*plugin->descriptor, options);
+  } catch (const std::exception& e) {
+    return load_failure(target, e.what());
+  }
+}
+
+}  // namespace
+
+std::string plugin_name_of_file(const std::string& file) {
+  const std::string base = fs::path(file).filename().string();
+  const std::string prefix = "libmspace-plugin-", suffix = ".so";
+  if (base.size() <= prefix.size() + suffix.size() || base.compare(0, prefix.size(), prefix) != 0 ||
+      base.compare(base.size() - suffix.size(), suffix.size(), suffix) != 0) {
+    return {};
+  }
+  return base.substr(prefix.size(), base.size() - prefix.size() - suffix.size());
+}
+
+int run_check(const CheckCommand& command, PluginRegistry& registry, std::ostream& out) {
+  conformance::Options options;
+  options.samples = command.samples;
+  options.seed = command.seed;
+  std::vector<conformance::Report> reports;
+  int failed = 0;
+  for (const std::string& target : command.targets) {
+    reports.push_back(check_target(target, registry, options));
+    conformance::print_report(reports.back(), out);
+    failed += reports.back().passed() ? 0 : 1;
+  }
+  if (!command.junit_file.empty()) {
+    std::ofstream junit(command.junit_file);
+    if (!junit) throw std::runtime_error("cannot write " + command.junit_file);
+    conformance::write_junit(reports, junit);
+  }
+  out << (failed == 0 ? "all " + std::to_string(reports.size()) + " plugin(s) passed\n"
+                      : std::to_string(failed) + " of " + std::to_string(reports.size()) + " plugin(s) FAILED\n");
+  return failed == 0 ? 0 : 1;
+}
+
+}  // namespace mspace::kernel

@@ -1,0 +1,31 @@
+// check.hpp — the `mspace check` command: the plugin conformance suite
+// (mspace/conformance.hpp) run on plugin files or registered plugin names.
+#pragma once
+
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace mspace::kernel {
+
+class PluginRegistry;
+
+struct CheckCommand {
+  /// Plugin library files (libmspace-plugin-<name>.so) or registered names.
+  std::vector<std::string> targets;
+  std::string junit_file;  ///< also write JUnit XML here when not empty
+  int samples = 8;         ///< random samples per check
+  std::uint64_t seed = 1;
+};
+
+/// The plugin name a library file must carry: "libmspace-plugin-<name>.so" → "<name>",
+/// or "" for any other file name.
+std::string plugin_name_of_file(const std::string& file);
+
+/// Checks every target and prints one report per target to `out`. Targets
+/// that cannot be loaded count as failures. Returns 0 when everything passed,
+/// 1 otherwise (the process exit code).
+int run_check(const CheckCommand& command, PluginRegistry& registry, std::ostream& out);
+
+}  // namespace mspace::kernel
