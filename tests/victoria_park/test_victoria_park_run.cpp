@@ -1,0 +1,141 @@
+// The whole Victoria Park run (config/victoria_park.yaml) against GPS: the
+// absolute trajectory error after SE(2) alignment, only at GPS fixes, must
+// meet the targets of issue 4 (RMSE ≤ 3 m, median ≤ 1.5 m).
+//
+// GPS measures the antenna, which sits at the laser; the filter estimates the
+// rear-axle centre. So the estimate is interpolated at each fix time and
+// carried to the antenna through the laser mount (x_r ⊕ x_rs) before the
+// comparison. Fixes where the estimate's bracketing poses are more than 2 s
+// apart are skipped (there are none: the estimate has a pose every 25 ms).
+//
+// The GPS unit was failing: besides 67 gaps longer than 2 s it has isolated
+// fixes between gaps, one of them 141 m off (t = 1223.28 s, 2.2 s after the
+// previous fix and 4.4 s before the next). The targets are checked on the
+// fixes that have another fix within 2 s ("skipping gaps": 6 of 4466 fixes
+// are isolated); the errors over all fixes are printed as well.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <vector>
+
+#include "config.hpp"
+#include "evaluation.hpp"
+#include "logging.hpp"
+#include "plugin_registry.hpp"
+#include "runner.hpp"
+#include "slam.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+
+constexpr double kMaxGap = 2.0;       ///< s, see the file comment
+constexpr double kTargetRmse = 3.0;   ///< m, issue 4
+constexpr double kTargetMedian = 1.5; ///< m, issue 4
+
+/// ../shared/datasets/victoria_park next to the source tree, or
+/// $MSPACE_DATA/victoria_park.
+std::filesystem::path data_dir() {
+  const char* env = std::getenv("MSPACE_DATA");
+  const std::filesystem::path base = env != nullptr && *env != '\0'
+                                         ? std::filesystem::path(env)
+                                         : std::filesystem::path(MSPACE_SOURCE_DIR).parent_path() / "shared" / "datasets";
+  return base / "victoria_park";
+}
+
+/// The fixes with another fix at most kMaxGap seconds before or after.
+std::vector<StampedPose> without_isolated_fixes(const std::vector<StampedPose>& fixes) {
+  std::vector<StampedPose> kept;
+  for (std::size_t i = 0; i < fixes.size(); ++i) {
+    const bool before = i > 0 && fixes[i].t - fixes[i - 1].t <= kMaxGap;
+    const bool after = i + 1 < fixes.size() && fixes[i + 1].t - fixes[i].t <= kMaxGap;
+    if (before || after) kept.push_back(fixes[i]);
+  }
+  return kept;
+}
+
+struct AteResult {
+  std::size_t pairs = 0;
+  double rmse = 0.0, median = 0.0, max = 0.0;
+};
+
+/// ATE of the point `mount` of the robot against position-only reference
+/// fixes, after SE(2) alignment.
+AteResult ate_at_point(const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& fixes,
+                       const Pose6& mount) {
+  std::vector<Eigen::Vector2d> est, ref;
+  for (const StampedPose& fix : fixes) {
+    const std::optional<Pose6> x_r = interpolate(estimate, fix.t, kMaxGap);
+    if (!x_r) continue;
+    const Pose6 antenna = compound(*x_r, mount);
+    est.emplace_back(antenna[kX], antenna[kY]);
+    ref.emplace_back(fix.pose[kX], fix.pose[kY]);
+  }
+  AteResult r;
+  r.pairs = est.size();
+  if (est.empty()) return r;
+  const Se2Alignment a = align_se2(est, ref);
+  std::vector<double> err;
+  for (std::size_t i = 0; i < est.size(); ++i) err.push_back((a.apply(est[i]) - ref[i]).norm());
+  double sum2 = 0.0;
+  for (double e : err) sum2 += e * e;
+  r.rmse = std::sqrt(sum2 / static_cast<double>(err.size()));
+  r.max = *std::max_element(err.begin(), err.end());
+  std::nth_element(err.begin(), err.begin() + static_cast<std::ptrdiff_t>(err.size() / 2), err.end());
+  r.median = err[err.size() / 2];
+  return r;
+}
+
+TEST(VictoriaParkRun, TrajectoryMatchesGpsWithinTargets) {
+  const std::filesystem::path data = data_dir();
+  if (!std::filesystem::is_directory(data)) {
+    GTEST_SKIP() << "Victoria Park data set not found at " << data
+                 << " (set MSPACE_DATA to the folder holding victoria_park/)";
+  }
+  set_log_level(LogLevel::Warn);
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunConfig config = load_config(std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "victoria_park.yaml", registry);
+  config.source.params.set("data_dir", data.string());
+  ASSERT_EQ(config.sensors.size(), 1u);
+  const Pose6 laser_mount = config.sensors[0].mount;
+
+  const auto start = std::chrono::steady_clock::now();
+  Slam slam(config, registry);
+  RunOptions options;
+  options.progress = false;
+  options.write_outputs = false;
+  run_to_end(slam, options);
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  int poles = 0;
+  for (const MapFeature& f : slam.features()) poles += f.feature->mspace_dim() == 3 ? 1 : 0;
+  const std::vector<StampedPose> fixes = without_isolated_fixes(slam.ground_truth());
+  const AteResult antenna = ate_at_point(slam.trajectory(), fixes, laser_mount);
+  const AteResult all = ate_at_point(slam.trajectory(), slam.ground_truth(), laser_mount);
+  const AteResult axle = ate_at_point(slam.trajectory(), fixes, Pose6::Zero());
+  std::cout << "victoria_park: " << slam.ground_truth().size() << " GPS fixes, " << antenna.pairs
+            << " paired (isolated fixes skipped)\n"
+            << "  ATE at the GPS antenna: RMSE " << antenna.rmse << " m, median " << antenna.median << " m, max "
+            << antenna.max << " m\n"
+            << "  over all " << all.pairs << " fixes: RMSE " << all.rmse << " m, median " << all.median << " m, max "
+            << all.max << " m\n"
+            << "  (rear-axle centre instead of the antenna: RMSE " << axle.rmse << " m, median " << axle.median
+            << " m)\n"
+            << "  poles in the map: " << poles << ", steps " << slam.stats().steps << ", wall time " << wall
+            << " s\n";
+
+  EXPECT_EQ(slam.ground_truth().size(), 4466u);
+  EXPECT_EQ(all.pairs, slam.ground_truth().size());
+  EXPECT_EQ(antenna.pairs, slam.ground_truth().size() - 6);
+  EXPECT_LE(antenna.rmse, kTargetRmse);
+  EXPECT_LE(antenna.median, kTargetMedian);
+}
+
+}  // namespace
