@@ -89,24 +89,42 @@ PredictedLine predict_line(const Eigen::Vector4d& x_o) {
   return out;
 }
 
-// Eq. 14 (first two rows) and Table II (a tangent row per end point).
-Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends) {
+// Eq. 14 (first two rows) and Table II (a tangent row per end point), with
+// the rotation taken about the anchor a rather than the centre: row 1 is the
+// normal displacement at a (times √2), i.e. the end points weighted by
+// w1 = (τ2 − τa)/L and w2 = (τa − τ1)/L. With a at the centre (w1 = w2 = ½)
+// this is eq. 14 exactly. Keeping a fixed while unmeasured ends slide keeps
+// the meaning of δx_p (and so of its covariance) unchanged — the same reason
+// eq. 33 scales the angle column by L/L_s.
+Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends, const Vec2& anchor) {
   const Geometry g = geometry(x_f);
+  const double w2 = g.t.dot(anchor - g.p1) / g.L, w1 = 1.0 - w2;
   Eigen::MatrixXd B = Eigen::MatrixXd::Zero(2 + static_cast<Eigen::Index>(ends.size()), 4);
   B.row(0) << g.gamma.transpose() / (g.L * kSqrt2), -g.gamma.transpose() / (g.L * kSqrt2);
-  B.row(1) << g.gamma.transpose() / kSqrt2, g.gamma.transpose() / kSqrt2;
+  B.row(1) << kSqrt2 * w1 * g.gamma.transpose(), kSqrt2 * w2 * g.gamma.transpose();
   for (std::size_t i = 0; i < ends.size(); ++i) B.block<1, 2>(2 + static_cast<Eigen::Index>(i), 2 * ends[i]) = g.t;
   return B;
 }
 
-// Eq. 15 and the tangent columns; B B̃ = I (eq. 12) because γ ⊥ t.
-Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends) {
+// Eq. 15 with the rotation about the anchor, dp_k = −√2 (τ_k − τ_a) γ δ1,
+// and the tangent columns; B B̃ = I (eq. 12) because γ ⊥ t.
+Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends, const Vec2& anchor) {
   const Geometry g = geometry(x_f);
+  const double tau_a = g.t.dot(anchor - g.p1);
   Eigen::MatrixXd Bd = Eigen::MatrixXd::Zero(4, 2 + static_cast<Eigen::Index>(ends.size()));
-  Bd.col(0) << g.L * g.gamma / kSqrt2, -g.L * g.gamma / kSqrt2;
+  Bd.col(0) << kSqrt2 * tau_a * g.gamma, -kSqrt2 * (g.L - tau_a) * g.gamma;
   Bd.col(1) << g.gamma / kSqrt2, g.gamma / kSqrt2;
   for (std::size_t i = 0; i < ends.size(); ++i) Bd.block<2, 1>(2 * ends[i], 2 + static_cast<Eigen::Index>(i)) = g.t;
   return Bd;
+}
+
+Vec2 wall_centre(const Eigen::Vector4d& x_f) { return 0.5 * (x_f.head<2>() + x_f.tail<2>()); }
+
+Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends) {
+  return wall_B(x_f, ends, wall_centre(x_f));
+}
+Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends) {
+  return wall_B_dual(x_f, ends, wall_centre(x_f));
 }
 
 // The measured line in the map: u_m = (cos β, sin β), β = α + θ_s, offset
@@ -148,18 +166,29 @@ WallFeature::WallFeature(const WallConfig& config, const Eigen::Vector4d& x_f, i
   if (!((x_f.tail<2>() - x_f.head<2>()).norm() > 0.0)) throw std::invalid_argument("wall: zero length");
   x_ = x_f;
   mdim_ = mspace_dim;
+  anchor_ = wall_centre(x_f);
 }
+
+void WallFeature::set_anchor(const Vec2& anchor) { anchor_ = anchor; }
 
 const CoordLayout& WallFeature::layout() const { return wall_layout(); }
 
 Eigen::MatrixXd WallFeature::B() const {
   if (mdim_ == 0) return Eigen::MatrixXd(0, 4);
-  return wall_B(x_, ends_);
+  return wall_B(x_, ends_, anchor_);
 }
 
 Eigen::MatrixXd WallFeature::B_dual() const {
   if (mdim_ == 0) return Eigen::MatrixXd(4, 0);
-  return wall_B_dual(x_, ends_);
+  return wall_B_dual(x_, ends_, anchor_);
+}
+
+// Eq. 24, then the anchor follows the line: rotation about it leaves it in
+// place, the normal move carries it along (its projection on the new line).
+void WallFeature::apply_perturbation(const Eigen::VectorXd& dx_p) {
+  Feature::apply_perturbation(dx_p);
+  const Geometry g = geometry(x_);
+  anchor_ = g.p1 + g.t.dot(anchor_ - g.p1) * g.t;
 }
 
 bool WallFeature::in_mspace(int end) const { return std::find(ends_.begin(), ends_.end(), end) != ends_.end(); }
@@ -274,8 +303,10 @@ Eigen::MatrixXd WallFeature::symmetry_directions() const {
 }
 
 SavedFeature WallFeature::save() const {
-  SavedFeature s{x_, mdim_, Eigen::VectorXd(static_cast<Eigen::Index>(ends_.size()))};
-  for (std::size_t i = 0; i < ends_.size(); ++i) s.extra[static_cast<Eigen::Index>(i)] = ends_[i];
+  const auto n = static_cast<Eigen::Index>(ends_.size());
+  SavedFeature s{x_, mdim_, Eigen::VectorXd(n + 2)};
+  for (Eigen::Index i = 0; i < n; ++i) s.extra[i] = ends_[static_cast<std::size_t>(i)];
+  s.extra.tail<2>() = anchor_;
   return s;
 }
 
@@ -315,6 +346,7 @@ std::optional<Extension> WallFeature::extend_line() {
   ext.J_own = Eigen::MatrixXd(2, 0);
   ext.C_new = symmetric(J_v * latest.C_v.topLeftCorner<2, 2>() * J_v.transpose());
   mdim_ = 2;
+  anchor_ = wall_centre(x_);  // eq. 14 about the centre at this moment
   gating_cov_.setZero();
   return ext;
 }
@@ -452,13 +484,17 @@ std::optional<FeatureSample> WallType::sample(int dim, std::uint64_t seed) const
 
 std::unique_ptr<Feature> WallType::restore(const SavedFeature& saved) const {
   if (saved.coords.size() != 4) throw std::invalid_argument("wall: saved coordinates must have 4 numbers");
+  const Eigen::Index n_ends = saved.extra.size() - 2;
+  if (n_ends < 0) throw std::invalid_argument("wall: saved extra must hold the measured ends and the anchor (x, y)");
   std::vector<int> ends;
-  for (Eigen::Index i = 0; i < saved.extra.size(); ++i) {
+  for (Eigen::Index i = 0; i < n_ends; ++i) {
     const double e = saved.extra[i];
     if (e != 0.0 && e != 1.0) throw std::invalid_argument("wall: saved end points must be 0 (start) or 1 (end)");
     ends.push_back(static_cast<int>(e));
   }
-  return std::make_unique<WallFeature>(config_, Eigen::Vector4d(saved.coords), saved.mspace_dim, ends);
+  auto wall = std::make_unique<WallFeature>(config_, Eigen::Vector4d(saved.coords), saved.mspace_dim, ends);
+  wall->set_anchor(saved.extra.tail<2>());
+  return wall;
 }
 
 }  // namespace mspace::wall

@@ -8,7 +8,10 @@
 //
 // M-space (Table II), rows of B in this order:
 //   dim 0: tentative, not in the estimator;
-//   dim 2: rotation about the centre and normal offset, B of eq. 14, B̃ of eq. 15;
+//   dim 2: rotation and normal offset, B of eq. 14, B̃ of eq. 15, taken about
+//          an anchor: the centre when the line entered the M-space, kept
+//          while unmeasured ends slide (otherwise sliding would silently
+//          change what the covariance describes);
 //   dim 3: + the tangential position of the first end point observed as a
 //          real end (start or end, whichever came first);
 //   dim 4: + the other one.
@@ -69,6 +72,10 @@ PredictedLine predict_line(const Eigen::Vector4d& x_o);
 
 /// Eq. 14/15 and Table II: B (dim × 4) and B̃ (4 × dim) for the wall x_f with
 /// the given end points in the M-space (in the order they were added).
+/// The rotation (row 1) is about `anchor`, a point on the wall; without it,
+/// about the centre as in eq. 14.
+Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends, const Eigen::Vector2d& anchor);
+Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends, const Eigen::Vector2d& anchor);
 Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends);
 Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends);
 
@@ -104,12 +111,16 @@ class WallFeature : public Feature {
   Eigen::MatrixXd B_dual() const override;
   bool innovation(const Eigen::VectorXd& x_o, const Measurement& m, Innovation& out) const override;
   Eigen::MatrixXd gating_covariance() const override;
+  void apply_perturbation(const Eigen::VectorXd& dx_p) override;
   void add_dense_information(const Measurement& m, const SensorView& view) override;
   Eigen::MatrixXd symmetry_directions() const override;
   SavedFeature save() const override;
   std::optional<Extension> extend(const SensorView& last_view) override;
 
   const std::vector<int>& mspace_ends() const { return ends_; }
+  /// The point the M-space rotation is about (the centre when the line entered).
+  const Eigen::Vector2d& anchor() const { return anchor_; }
+  void set_anchor(const Eigen::Vector2d& anchor);
   int num_observations() const { return static_cast<int>(observations_.size()); }
 
  private:
@@ -124,6 +135,9 @@ class WallFeature : public Feature {
   std::vector<int> ends_;  ///< ends in the M-space, in the order added
   std::deque<WallObservation> observations_;
   Eigen::Matrix4d gating_cov_ = Eigen::Matrix4d::Zero();
+  /// Rotation pivot of the M-space (a point on the wall). It stays put when
+  /// unmeasured ends slide, so δx_p keeps its meaning (see wall_B).
+  Eigen::Vector2d anchor_ = Eigen::Vector2d::Zero();
 };
 
 class WallType : public FeatureType {

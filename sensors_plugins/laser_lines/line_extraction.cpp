@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <utility>
 
 namespace mspace::laser_lines {
@@ -172,17 +173,20 @@ Vec2 end_point(const Segment& s, double along) {
   return s.rho * u + along * t;
 }
 
-/// Is segment `self` meeting another segment at a corner at the end whose last inlier is beam `end_beam`?
-bool is_corner(const std::vector<Segment>& segs, std::size_t self, int end_beam, double end_s, const LineConfig& c) {
+/// Where segment `self` meets another segment at a corner at the end whose
+/// last inlier is beam `end_beam`: the two lines' intersection; none when no
+/// segment within two beams meets it at min_corner_angle or more.
+std::optional<Vec2> corner_point(const std::vector<Segment>& segs, std::size_t self, int end_beam, double end_s,
+                                 const LineConfig& c) {
   for (std::size_t k = 0; k < segs.size(); ++k) {
     if (k == self) continue;
     const Segment& o = segs[k];
     const int beam_gap = std::min(std::abs(o.first - end_beam), std::abs(o.last - end_beam));
     if (beam_gap > 2 || line_angle(o.alpha, segs[self].alpha) < c.min_corner_angle) continue;
     Vec2 q;
-    if (intersect(segs[self], o, q) && (q - end_point(segs[self], end_s)).norm() <= c.corner_distance) return true;
+    if (intersect(segs[self], o, q) && (q - end_point(segs[self], end_s)).norm() <= c.corner_distance) return q;
   }
-  return false;
+  return std::nullopt;
 }
 
 /// Why segment `self` stops at its end with last inlier `end_beam`; `step` = ±1 points outwards.
@@ -192,7 +196,7 @@ EndReason classify_end(const ScanPoints& scan, const std::vector<Segment>& segs,
   if (j < 0 || j >= scan.size()) return EndReason::Fov;
   const double r = scan.ranges[j];
   if (!scan.valid[j]) return r > 0.0 && r < c.min_range ? EndReason::Occluded : EndReason::MaxRange;
-  if (is_corner(segs, self, end_beam, end_s, c)) return EndReason::Corner;
+  if (corner_point(segs, self, end_beam, end_s, c)) return EndReason::Corner;
   const double expected = expected_range(fits[self], scan.bearings[j], c);
   if (!std::isfinite(expected)) return EndReason::Unknown;
   if (r < expected - c.depth_jump) return EndReason::Occluded;
@@ -200,23 +204,40 @@ EndReason classify_end(const ScanPoints& scan, const std::vector<Segment>& segs,
   return EndReason::Unknown;
 }
 
-/// Variance of an end's position along the line: σ² + gap²/12, the gap being
-/// the stretch between the last inlier and where the next beam crosses the line.
-double end_variance(const ScanPoints& scan, const LineFit& fit, int end_beam, int step, double end_s,
-                    double sigma2, const LineConfig& c) {
+/// Where the end lies along the line and its variance. The wall ends
+/// somewhere between the last inlier and where the next beam crosses the
+/// line (the gap): for a Depth end the estimate is the gap's middle with
+/// variance σ² + gap²/12 (uniform over the gap), not the last inlier, which
+/// is short by gap/2 on average; for a Corner end it is the intersection
+/// with the other wall (σ² + gap²/12 kept as a conservative bound); other
+/// ends stay at the last inlier.
+struct EndEstimate {
+  double s = 0.0, variance = 0.0;
+};
+EndEstimate end_estimate(const ScanPoints& scan, const std::vector<Segment>& segs, const LineFit& fit,
+                         std::size_t self, int end_beam, int step, double end_s, EndReason reason, double sigma2,
+                         const LineConfig& c) {
   constexpr double kMaxGap = 1.0;
   const int j = end_beam + step;
   double gap = scan.ranges[end_beam] * std::abs(scan.bearings[std::clamp(j, 0, scan.size() - 1)] -
                                                 scan.bearings[end_beam]);
+  std::optional<double> next_crossing;
   if (j >= 0 && j < scan.size()) {
     const double expected = expected_range(fit, scan.bearings[j], c);
     if (std::isfinite(expected)) {
       const Vec2 q = expected * Vec2(std::cos(scan.bearings[j]), std::sin(scan.bearings[j]));
-      gap = std::abs(fit.t().dot(q) - end_s);
+      next_crossing = fit.t().dot(q);
+      gap = std::abs(*next_crossing - end_s);
     }
   }
   gap = std::min(gap, kMaxGap);
-  return sigma2 + gap * gap / 12.0;
+  EndEstimate out{end_s, sigma2 + gap * gap / 12.0};
+  if (reason == EndReason::Corner) {
+    if (const std::optional<Vec2> q = corner_point(segs, self, end_beam, end_s, c)) out.s = fit.t().dot(*q);
+  } else if (reason == EndReason::Depth && next_crossing && std::abs(*next_crossing - end_s) <= kMaxGap) {
+    out.s = 0.5 * (end_s + *next_crossing);
+  }
+  return out;
 }
 
 /// (ρ, α) covariance of a fit (see header) with the configured floors.
@@ -273,6 +294,7 @@ std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen
     fits.push_back(fit);
   }
 
+  std::vector<EndEstimate> ends_a(segs.size()), ends_b(segs.size());
   for (std::size_t k = 0; k < segs.size(); ++k) {
     Segment& s = segs[k];
     const LineFit& fit = fits[k];
@@ -285,8 +307,15 @@ std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen
     s.end_a = classify_end(scan, segs, fits, k, beam_a, step_a, s.s_a, c);
     s.end_b = classify_end(scan, segs, fits, k, beam_b, step_b, s.s_b, c);
     s.C.topLeftCorner<2, 2>() = line_covariance(fit, sigma2, c);
-    s.C(2, 2) = end_variance(scan, fit, beam_a, step_a, s.s_a, sigma2, c);
-    s.C(3, 3) = end_variance(scan, fit, beam_b, step_b, s.s_b, sigma2, c);
+    ends_a[k] = end_estimate(scan, segs, fit, k, beam_a, step_a, s.s_a, s.end_a, sigma2, c);
+    ends_b[k] = end_estimate(scan, segs, fit, k, beam_b, step_b, s.s_b, s.end_b, sigma2, c);
+  }
+  // Applied after all ends are classified: corner tests use the inlier ends.
+  for (std::size_t k = 0; k < segs.size(); ++k) {
+    segs[k].s_a = ends_a[k].s;
+    segs[k].s_b = ends_b[k].s;
+    segs[k].C(2, 2) = ends_a[k].variance;
+    segs[k].C(3, 3) = ends_b[k].variance;
   }
   return segs;
 }

@@ -224,5 +224,49 @@ TEST(Wall, LifeCycleGrowsMspaceAndSlidesEnds) {
   EXPECT_LT(in.eta.norm(), 1e-9);
 }
 
+// Rotating the whole world (robot and wall) about the origin changes no
+// innovation: J_η,state (eq. 30) must annihilate that direction, or relative
+// measurements would create absolute heading information.
+TEST(Wall, InnovationJacobianAnnihilatesGlobalRotation) {
+  const Eigen::Vector4d x_f(13.628, 0.0819, 1.4999, 0.0157);
+  const Pose6 x_ms = make_pose2d(6.3, 1.5, 0.005);
+  const WallFeature w(WallConfig{}, x_f, 2, {});
+  Eigen::MatrixXd J_of, J_os;
+  const Eigen::VectorXd x_o = to_sensor_frame(kLayout, x_f, x_ms, &J_of, &J_os);
+  const PredictedLine p = predict_line(x_o);
+  Eigen::VectorXd dpose = Eigen::VectorXd::Zero(6);
+  dpose[kX] = -x_ms[kY];
+  dpose[kY] = x_ms[kX];
+  dpose[kTheta] = 1.0;
+  Eigen::Vector4d dx_f;
+  dx_f << -x_f[1], x_f[0], -x_f[3], x_f[2];
+  const Eigen::Vector2d dp = w.B() * dx_f;
+  const Eigen::Vector4d d_eta = p.J * (J_os * dpose + J_of * w.B_dual() * dp);
+  std::cout << "J_os*N " << (J_os * dpose).transpose() << "\nJ_of*Bd*dp " << (J_of * w.B_dual() * dp).transpose()
+            << "\n d_eta " << d_eta.transpose() << "\n";
+  EXPECT_LT(std::abs(d_eta[0]), 1e-9);
+  EXPECT_LT(std::abs(d_eta[1]), 1e-9);
+}
+
+// The anchored B/B̃ (rotation about a point that stays put while unmeasured
+// ends slide) are dual at every dimension, equal eq. 14/15 at the centre,
+// and the anchor does not move under a rotation perturbation.
+TEST(Wall, AnchoredProjectionsAreDualAndMatchEq14AtTheCentre) {
+  const Eigen::Vector4d x = some_wall();
+  const Eigen::Vector2d anchor = x.head<2>() + 0.2 * (x.tail<2>() - x.head<2>());
+  for (const std::vector<int>& ends : {std::vector<int>{}, {kStart}, {kEnd, kStart}}) {
+    const Eigen::MatrixXd B = wall_B(x, ends, anchor), Bd = wall_B_dual(x, ends, anchor);
+    EXPECT_LT((B * Bd - Eigen::MatrixXd::Identity(B.rows(), B.rows())).norm(), 1e-12);
+  }
+  const Eigen::Vector2d centre = 0.5 * (x.head<2>() + x.tail<2>());
+  EXPECT_LT((wall_B(x, {}, centre) - wall_B(x, {})).norm(), 1e-12);
+  WallFeature w(WallConfig{}, x, 2, {});
+  w.set_anchor(anchor);
+  w.apply_perturbation(Eigen::Vector2d(0.05, 0.0));  // rotation only
+  EXPECT_LT((w.anchor() - anchor).norm(), 1e-3 * 0.05);  // second order
+  const Eigen::Vector2d t = (w.coords().tail<2>() - w.coords().head<2>()).normalized();
+  EXPECT_NEAR(t.x() * (anchor.y() - w.coords()[1]) - t.y() * (anchor.x() - w.coords()[0]), 0.0, 1e-3);
+}
+
 }  // namespace
 }  // namespace mspace::wall

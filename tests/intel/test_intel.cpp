@@ -1,0 +1,161 @@
+// Walls from a 2-D laser through the kernel (T-RO §IV-F, §VI).
+//  - LaserRoom: a simulated floor of walls with known truth; the filter must
+//    be consistent (robot NEES) and accurate.
+//  - Intel: config/intel_walls.yaml on the Intel Research Lab data, scored
+//    with the relations metric of Kümmerle et al. 2009 on the 90 relations
+//    that fall on the 910 scans.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <string>
+
+#include "config.hpp"
+#include "logging.hpp"
+#include "plugin_registry.hpp"
+#include "relations.hpp"
+#include "runner.hpp"
+#include "slam.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+
+const std::filesystem::path kSource = MSPACE_SOURCE_DIR;
+const std::filesystem::path kIntelDir = kSource.parent_path() / "shared" / "datasets" / "intel_lab";
+
+class WallRun : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    registry_.add_search_dir(MSPACE_PLUGIN_DIR);
+    registry_.add_search_dir(MSPACE_INTEL_FIXTURE_DIR);
+    set_log_level(LogLevel::Warn);
+  }
+
+  RunResult run(const RunConfig& c) {
+    Slam slam(c, registry_);
+    RunOptions options;
+    options.progress = false;
+    options.write_outputs = false;
+    return run_to_end(slam, options);
+  }
+
+  PluginRegistry registry_;
+};
+
+/// The laser_room simulation with the wall and laser_lines settings of
+/// config/intel_walls.yaml; the motion model's noise is the simulated one.
+std::string room_config(int seed) {
+  return R"(
+run: {name: laser_room}
+source:
+  plugin: laser_room
+  seed: )" + std::to_string(seed) + R"(
+  laps: 2
+  step: 0.3
+  range_sigma: 0.01
+  xy_noise_per_m: 0.05
+  xy_noise_floor: 0.005
+  theta_noise_per_rad: 0.05
+  theta_noise_per_m: 2.0
+  theta_noise_floor: 0.2
+motion:
+  plugin: odometry2d
+  xy_noise_per_m: 0.05
+  xy_noise_floor: 0.005
+  theta_noise_per_rad: 0.05
+  theta_noise_per_m: 2.0
+  theta_noise_floor: 0.2
+estimator: {plugin: ekf}
+features:
+  wall:
+    plugin: wall
+    min_observations: 3
+    min_points: 30
+    min_length: 1.0
+    max_normal_std: 0.05
+    min_end_observations: 3
+    max_end_spread: 0.1
+    max_path_distance: 15
+    max_observations: 40
+    match_margin: 0.5
+sensors:
+  laser:
+    channel: laser
+    mount: [0, 0, 0, 0, 0, 0]
+    extractor:
+      plugin: laser_lines
+      range_sigma: 0.01
+      max_range: 20
+      split_distance: 0.06
+      min_points: 10
+      min_length: 0.6
+      max_rms: 0.03
+      depth_jump: 0.2
+    feeds: [wall]
+association:
+  gate_probability: 0.99
+  new_feature_probability: 0.9999
+  tentative_max_age: 10
+)";
+}
+
+// Measured (3 seeds, 2 laps of a 14 m × 10 m floor, 1 cm range noise):
+// ATE 0.013 / 0.021 / 0.025 m, mean robot NEES 9.1 / 5.0 / 5.4 (3 dof)
+// (11.3 / 5.0 / 5.4 before real ends were unbiased in laser_lines).
+// Open: with walls held at dim 2 only, the heading σ still falls from 1.09°
+// (step 3, when the first walls enter, all relative to that pose) to 0.41°
+// while the error stays ≈ 1.2°: information the model cannot have, so a
+// structural cause, not a noise value.
+// Before the wall's rotation was anchored (wall_B), sliding ends changed
+// what the covariance meant and the NEES was 34 / 112 / 34 with the heading
+// σ collapsing to 0.04° while the error was 0.3°. A consistent filter would
+// give ≈ 3; the remaining factor 2–4 is still open, so this is a regression
+// bound (NEES < 20), not a proof of consistency. ATE bound: 5 cm, about 2×
+// the worst seed, far below what dead reckoning gives (metres).
+TEST_F(WallRun, SimulatedFloorIsAccurateAndNotGrosslyOverconfident) {
+  for (int seed = 1; seed <= 3; ++seed) {
+    const RunResult r = run(parse_config(room_config(seed), "laser_room.yaml", registry_));
+    ASSERT_TRUE(r.summary.errors.has_value());
+    std::cout << "seed " << seed << ": ATE " << r.summary.errors->ate_rmse << " m, final "
+              << r.summary.errors->final_translation << " m, mean NEES " << r.summary.mean_nees << " ("
+              << r.summary.nees_dof << " dof); walls by dim:";
+    for (const auto& [dim, n] : r.summary.features_by_dim.at("wall")) std::cout << " " << dim << ":" << n;
+    std::cout << "\n";
+    EXPECT_LT(r.summary.errors->ate_rmse, 0.05) << "seed " << seed;
+    EXPECT_LT(r.summary.mean_nees, 20.0) << "seed " << seed;
+  }
+}
+
+// config/intel_walls.yaml as `mspace run` runs it, scored on the 90
+// relations that fall on the 910 scans (max_dt 1e-4 s; raw odometry scores
+// 3.31 m there, GMapping 0.036 m). Measured: 2.34 m ± 5.17 m, 7.7° mean; the
+// run diverges (ATE vs GMapping 7.9 m) and small changes move it between
+// about 1.8 and 6 m.
+// The issue's target is 0.10 m; not reached yet. Bound asserted: better than
+// raw odometry (3.31 m).
+TEST_F(WallRun, IntelLabBeatsRawOdometryOnTheRelations) {
+  if (!std::filesystem::is_regular_file(kIntelDir / "intel_910_scans.txt") ||
+      !std::filesystem::is_regular_file(kIntelDir / "intel.relations"))
+    GTEST_SKIP() << "Intel Research Lab data not found in " << kIntelDir << " (see config/intel_walls.yaml)";
+  const std::string data = (kSource.parent_path() / "shared" / "datasets").string();
+  setenv("MSPACE_DATA", data.c_str(), /*overwrite=*/0);
+  RunConfig c = load_config(kSource / "config" / "intel_walls.yaml", registry_);
+  c.evaluation.relations = (kIntelDir / "intel.relations").string();
+  c.evaluation.relations_max_dt = 1e-4;
+  Slam slam(c, registry_);
+  while (slam.step()) {
+  }
+  const RelationErrors e =
+      evaluate_relations(slam.trajectory(), read_relations(kIntelDir / "intel.relations"), 1e-4);
+  std::cout << "Intel: " << e.matched << " relations, translation " << e.translation.mean << " ± "
+            << e.translation.std << " m (squared " << e.translation_sq.mean << " m²), rotation " << e.rotation_deg.mean
+            << " ± " << e.rotation_deg.std << " deg (squared " << e.rotation_sq_deg.mean << " deg²)\n";
+  EXPECT_EQ(e.matched, 90u);
+  EXPECT_LT(e.translation.mean, 3.31);
+}
+
+}  // namespace
