@@ -63,17 +63,12 @@ Eigen::Vector3d spherical_to_cartesian(const Eigen::Vector3d& v, Eigen::Matrix3d
   return {r * ce * cb, r * ce * sb, r * se};
 }
 
-BackProjection back_project(const Eigen::Vector3d& v, const Pose6& x_ms) {
+placement::Placement back_project(const Eigen::Vector3d& v, const Pose6& x_ms) {
+  // Spherical → Cartesian in the sensor frame, then the inverse of eq. 7
+  // (the generic SDK placement: x_mf = R_ms p + t_ms with its Jacobians).
   Eigen::Matrix3d J_pv;
   const Eigen::Vector3d p = spherical_to_cartesian(v, &J_pv);
-  // The inverse of eq. 7: x_mf = R_msᵀ p + (x, y, z)_ms (generic SDK transform).
-  Eigen::MatrixXd J_fo, J_fs;
-  const Eigen::VectorXd x_f = to_map_frame(point_layout(), p, x_ms, &J_fo, &J_fs);
-  BackProjection bp;
-  bp.x_f = x_f;
-  bp.J_v = J_fo * J_pv;
-  bp.J_s = J_fs;
-  return bp;
+  return placement::place(point_layout(), p, J_pv, x_ms);
 }
 
 // ---------------------------------------------------------------- PointFeature
@@ -123,12 +118,10 @@ Eigen::MatrixXd PointFeature::gating_covariance() const {
 
 void PointFeature::place_at(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v,
                             const SensorView& view) {
-  const BackProjection bp = back_project(v, view.x_ms);
+  const placement::Placement bp = back_project(v, view.x_ms);
   x_ = bp.x_f;
   // First-order covariance of x_f = g(v, x_ms) with v and x_ms independent.
-  const Eigen::Matrix3d C =
-      bp.J_v * C_v * bp.J_v.transpose() + bp.J_s * view.C_ms * bp.J_s.transpose();
-  gating_cov_ = 0.5 * (C + C.transpose());
+  gating_cov_ = placement::covariance(bp, C_v, view.C_ms);
 }
 
 void PointFeature::add_dense_information(const Measurement& m, const SensorView& view) {
@@ -152,15 +145,8 @@ std::optional<Extension> PointFeature::extend(const SensorView& last_view) {
   }
   // Standard EKF landmark initialisation: δx_f = J_s δx_ms + J_v δv, and with
   // B = I the new M-space perturbations are δx_f itself.
-  const BackProjection bp = back_project(latest.v, latest.view.x_ms);
-  Extension ext;
-  ext.new_dims = kDim;
-  ext.sensor = latest.view.sensor;
-  ext.J_sensor = bp.J_s;
-  ext.J_own = Eigen::MatrixXd(kDim, 0);
-  const Eigen::Matrix3d C_new = bp.J_v * latest.C_v * bp.J_v.transpose();
-  ext.C_new = 0.5 * (C_new + C_new.transpose());
-
+  const placement::Placement bp = back_project(latest.v, latest.view.x_ms);
+  Extension ext = placement::full_extension(bp, latest.C_v, latest.view.sensor);
   x_ = bp.x_f;
   mdim_ = kDim;
   observations_.clear();

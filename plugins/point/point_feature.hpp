@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "mspace/feature.hpp"
+#include "mspace/placement.hpp"
 #include "mspace/params.hpp"
 
 namespace mspace::point {
@@ -60,14 +61,9 @@ Eigen::Vector3d cartesian_to_spherical(const Eigen::Vector3d& p, Eigen::Matrix3d
 Eigen::Vector3d spherical_to_cartesian(const Eigen::Vector3d& v, Eigen::Matrix3d* J = nullptr);
 
 /// A measurement v taken from sensor pose x_ms, placed in the map frame.
-struct BackProjection {
-  Eigen::Vector3d x_f;              ///< the point in the map frame
-  Eigen::Matrix3d J_v;              ///< ∂x_f/∂v
-  Eigen::Matrix<double, 3, 6> J_s;  ///< ∂x_f/∂x_ms
-};
-
-/// x_f = to_map_frame(spherical_to_cartesian(v), x_ms) with its Jacobians.
-BackProjection back_project(const Eigen::Vector3d& v, const Pose6& x_ms);
+/// x_f = to_map_frame(spherical_to_cartesian(v), x_ms) with its Jacobians
+/// J_v = ∂x_f/∂v and J_s = ∂x_f/∂x_ms (mspace/placement.hpp).
+placement::Placement back_project(const Eigen::Vector3d& v, const Pose6& x_ms);
 
 /// One stored observation of a tentative point (its dense information).
 struct PointObservation {

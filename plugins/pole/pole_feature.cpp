@@ -7,7 +7,7 @@
 #include <stdexcept>
 
 #include "mspace/pose.hpp"
-#include "placement.hpp"
+#include "mspace/placement.hpp"
 
 namespace mspace::pole {
 namespace {

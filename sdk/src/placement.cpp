@@ -1,5 +1,5 @@
-// placement.cpp — see placement.hpp.
-#include "placement.hpp"
+// placement.cpp — see mspace/placement.hpp.
+#include "mspace/placement.hpp"
 
 #include "mspace/transform.hpp"
 

@@ -1,7 +1,6 @@
-// placement.hpp — placing a new feature in the map from one measurement, for
-// any coordinate layout. Nothing here knows the pole: it is the generic part
-// of "standard EKF landmark initialisation" and would fit in the SDK next to
-// to_map_frame (see the report of issue 4).
+// mspace/placement.hpp — placing a new feature in the map from one
+// measurement, for any coordinate layout: the generic part of the standard
+// EKF landmark initialisation, shared by feature types (point, pole, …).
 //
 // A feature type supplies the sensor-frame coordinates x_o(v) of a measurement
 // v with J_ov = ∂x_o/∂v. Then x_f = g(v, x_ms) = to_map_frame(x_o(v), x_ms) and
