@@ -94,13 +94,26 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   for (Eigen::Index i = 0; i < truth.cols(); ++i)
     cv::drawMarker(img, v.px(truth(0, i), truth(1, i)), {120, 120, 120}, cv::MARKER_CROSS, 9, 1, cv::LINE_AA);
 
+  // A path, broken where consecutive poses are more than a second apart
+  // (gaps in a reference such as GPS are not joined by straight lines).
   auto polyline = [&](const std::vector<StampedPose>& poses, const cv::Scalar& colour, int width) {
     std::vector<cv::Point> pts;
-    pts.reserve(poses.size());
-    for (const StampedPose& p : poses) pts.push_back(v.px(p.pose[kX], p.pose[kY]));
-    if (pts.size() > 1) cv::polylines(img, pts, false, colour, width, cv::LINE_AA);
+    for (std::size_t i = 0; i <= poses.size(); ++i) {
+      if (i == poses.size() || (i > 0 && poses[i].t - poses[i - 1].t > 1.0)) {
+        if (pts.size() > 1) cv::polylines(img, pts, false, colour, width, cv::LINE_AA);
+        pts.clear();
+      }
+      if (i < poses.size()) pts.push_back(v.px(poses[i].pose[kX], poses[i].pose[kY]));
+    }
   };
-  polyline(slam.ground_truth(), {60, 170, 60}, 2);
+  // Position-only references (e.g. GPS fixes) as dots, full poses as a path.
+  const auto& truth_poses = slam.ground_truth();
+  const bool positions_only =
+      !truth_poses.empty() && (truth_poses.front().known & (1u << kTheta)) == 0;
+  if (positions_only)
+    for (const StampedPose& p : truth_poses) cv::circle(img, v.px(p.pose[kX], p.pose[kY]), 1, {60, 170, 60}, cv::FILLED);
+  else
+    polyline(truth_poses, {60, 170, 60}, 2);
   polyline(slam.trajectory(), {200, 80, 30}, 1);
 
   for (const MapFeature& f : slam.features()) {
@@ -112,7 +125,12 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
       for (std::size_t i = 0; i + 1 < pts.size(); ++i)
         cv::line(img, v.px(pts[i].x(), pts[i].y()), v.px(pts[i + 1].x(), pts[i + 1].y()), colour, 2, cv::LINE_AA);
     } else if (pts.size() == 1) {
-      cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
+      const std::optional<double> radius = f.feature->footprint_radius();
+      if (radius && *radius * v.scale >= 2.0)  // drawn to scale when it shows
+        cv::circle(img, v.px(pts[0].x(), pts[0].y()), static_cast<int>(std::lround(*radius * v.scale)), colour, 2,
+                   cv::LINE_AA);
+      else
+        cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
     }
     if (dim == 0) continue;
     // Covariance of x_f implied by the M-space covariance: B̃ P B̃ᵀ (eq. 11).
@@ -147,7 +165,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     row += 18;
   };
   legend("estimated trajectory", {200, 80, 30});
-  if (!slam.ground_truth().empty()) legend("true trajectory", {60, 170, 60});
+  if (!slam.ground_truth().empty()) legend(positions_only ? "reference positions (dots)" : "true trajectory", {60, 170, 60});
   if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
   legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
   if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});

@@ -96,6 +96,9 @@ class PoleFeature : public Feature {
   /// empty once initialised.
   SavedFeature save() const override;
 
+  /// The estimated trunk radius (x_f's scalar block), for pictures.
+  std::optional<double> footprint_radius() const override { return x_[0]; }
+
   /// Initialises a tentative pole to dim 3 once it has `min_detections`
   /// detections, the newest taken at `last_view` (same time and sensor) at a
   /// range of at least `min_range_for_init`.

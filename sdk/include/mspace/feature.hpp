@@ -113,6 +113,10 @@ class Feature {
   /// wall end points along the wall). Zero columns: none declared.
   virtual Eigen::MatrixXd symmetry_directions() const { return {}; }
 
+  /// For pictures only: the radius (m) of the feature's horizontal footprint
+  /// around its point block, e.g. a tree trunk's; std::nullopt draws a dot.
+  virtual std::optional<double> footprint_radius() const { return std::nullopt; }
+
   // ---- Shared coordinates (T-RO §VI, eq. 33) -------------------------------
   //
   // M-space columns are ordered: the feature's own dimensions first, then one
