@@ -4,7 +4,7 @@
 // kernel logs as "mspace". All of them write to stderr, one line per message:
 //   [I] [walls] 12 features in the map
 // (level letter T/D/I/W/E, then the logger name). Time stamps are left out on
-// purpose: a run's time comes from its data, not from the wall clock. One
+// purpose: a run's time comes from its data, not from the computer clock. One
 // global level applies to all loggers.
 #pragma once
 

@@ -219,7 +219,7 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   std::ostringstream os;
   os << std::fixed << std::setprecision(3);
   os << "run '" << s.run_name << "': " << s.steps << " steps, " << s.data_seconds << " s of data in "
-     << s.wall_seconds << " s wall time";
+     << s.wall_seconds << " s elapsed";
   if (s.wall_seconds > 0) os << " (" << std::setprecision(1) << s.data_seconds / s.wall_seconds << "x real time)";
   os << std::setprecision(3) << "\n";
   os << "  measurements " << st.measurements << ", matched " << st.matched << ", used in updates " << st.updates

@@ -21,7 +21,7 @@ struct RunSummary {
   std::string config_file;
   long long steps = 0;
   double data_seconds = 0.0;  ///< time span covered by the data
-  double wall_seconds = 0.0;  ///< wall-clock time of the whole run
+  double wall_seconds = 0.0;  ///< elapsed (real) time of the whole run
   int state_dimension = 0;
   /// feature-type instance → M-space dimension → count
   std::map<std::string, std::map<int, int>> features_by_dim;

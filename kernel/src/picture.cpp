@@ -144,7 +144,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     }
   }
 
-  // Shared coordinates (e.g. wall corners) as squares.
+  // Shared coordinates (e.g. a corner two features meet at) as squares.
   for (const SharedCoordinate& c : slam.shared_coordinates()) {
     const Eigen::VectorXd p = slam.shared_value(c);
     if (p.size() < 2) continue;
