@@ -65,6 +65,12 @@ int run_check(const CheckCommand& command, PluginRegistry& registry, std::ostrea
   conformance::Options options;
   options.samples = command.samples;
   options.seed = command.seed;
+  for (const std::string& assignment : command.params) {
+    const auto eq = assignment.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw std::invalid_argument("--param '" + assignment + "': expected NAME=VALUE");
+    options.params[assignment.substr(0, eq)] = assignment.substr(eq + 1);
+  }
   std::vector<conformance::Report> reports;
   int failed = 0;
   for (const std::string& target : command.targets) {

@@ -17,6 +17,7 @@ struct CheckCommand {
   std::string junit_file;  ///< also write JUnit XML here when not empty
   int samples = 8;         ///< random samples per check
   std::uint64_t seed = 1;
+  std::vector<std::string> params;  ///< "NAME=VALUE" parameter values for the instances
 };
 
 /// The plugin name a library file must carry: "libmspace-plugin-<name>.so" → "<name>",

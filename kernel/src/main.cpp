@@ -148,6 +148,7 @@ int main(int argc, char** argv) {
   check->add_option("--junit", check_cmd.junit_file, "also write JUnit XML to this file");
   check->add_option("--samples", check_cmd.samples, "random samples per check")->check(CLI::PositiveNumber);
   check->add_option("--seed", check_cmd.seed, "base seed of the samples");
+  check->add_option("--param", check_cmd.params, "NAME=VALUE for the checked instances, e.g. a data file (repeatable)");
   add_common(check, common);
 
   CLI11_PARSE(app, argc, argv);

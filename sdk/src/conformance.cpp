@@ -190,6 +190,26 @@ void check_descriptor(const PluginDescriptor& d, Recorder& r) {
 
 }  // namespace
 
+namespace detail {
+
+Params instance_params(const PluginDescriptor& descriptor, const Options& options) {
+  Params params = Params::defaults(descriptor.params);
+  for (const auto& [name, text] : options.params) {
+    const auto spec = std::find_if(descriptor.params.begin(), descriptor.params.end(),
+                                   [&name = name](const ParamSpec& s) { return s.name == name; });
+    if (spec == descriptor.params.end())
+      throw std::invalid_argument("plugin '" + descriptor.name + "' has no parameter '" + name + "'");
+    params.set(name, parse_param(*spec, text));
+  }
+  for (const ParamSpec& spec : descriptor.params)
+    if (spec.required && !params.has(spec.name))
+      throw std::invalid_argument("parameter '" + spec.name + "' has no default: give it with --param " + spec.name +
+                                  "=VALUE");
+  return params;
+}
+
+}  // namespace detail
+
 Report check_plugin(const PluginDescriptor& descriptor, const Options& options) {
   Report report;
   report.plugin = descriptor.name;
@@ -198,17 +218,13 @@ Report check_plugin(const PluginDescriptor& descriptor, const Options& options) 
   check_descriptor(descriptor, r);
   std::unique_ptr<PluginObject> object;
   if (descriptor.factory != nullptr) {
-    bool required_missing = false;
-    for (const ParamSpec& s : descriptor.params) required_missing = required_missing || s.required;
-    if (required_missing) {
-      r.fail("construct.defaults", "a parameter has no default: the suite cannot create an instance");
-    } else {
-      PluginArgs args;
-      args.instance_name = "mspace_check";
-      args.params = Params::defaults(descriptor.params);
-      detail::guarded(r, "construct.defaults", [&] { object = descriptor.factory(args); });
-      r.at_most("construct.defaults", object == nullptr ? 1 : 0, 0, "the factory returned nullptr");
-    }
+    PluginArgs args;
+    args.instance_name = "mspace_check";
+    detail::guarded(r, "construct.defaults", [&] {
+      args.params = detail::instance_params(descriptor, options);
+      object = descriptor.factory(args);
+    });
+    r.at_most("construct.defaults", object == nullptr ? 1 : 0, 0, "no instance could be created");
   }
   if (object != nullptr) {
     // Anything a check did not catch itself fails "checks.completed".

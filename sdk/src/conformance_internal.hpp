@@ -72,6 +72,11 @@ void check_feature_type(PluginObject& object, const Options& options, Recorder& 
 void check_motion_model(PluginObject& object, const Options& options, Recorder& r);
 void check_estimator(PluginObject& object, const Options& options, Recorder& r);
 void check_extractor(PluginObject& object, const Options& options, Recorder& r);
+/// The parameters the suite creates instances with: the plugin's defaults
+/// and Options::params over them. Throws std::invalid_argument for an unknown
+/// parameter, a bad value, or a required parameter left unset.
+Params instance_params(const PluginDescriptor& descriptor, const Options& options);
+
 void check_source(const PluginDescriptor& descriptor, PluginObject& object, const Options& options,
                   Recorder& r);
 

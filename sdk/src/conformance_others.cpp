@@ -262,11 +262,19 @@ void check_estimator(PluginObject& object, const Options& options, Recorder& r) 
 
 void check_extractor(PluginObject& object, const Options& options, Recorder& r) {
   auto& ex = static_cast<Extractor&>(object);
-  guarded(r, "extractor.empty_reading", [&] {
+  // An empty reading gives no measurements — or, for an extractor that needs
+  // a particular reading layout, a clear error (an exception with a message).
+  {
     std::vector<Measurement> out;
-    ex.extract(SensorReading{"mspace_check", 0.0, Eigen::MatrixXd(0, 0), {}}, out);
-    r.at_most("extractor.empty_reading", static_cast<double>(out.size()), 0, "an empty reading gave measurements");
-  });
+    try {
+      ex.extract(SensorReading{"mspace_check", 0.0, Eigen::MatrixXd(0, 0), {}}, out);
+      r.at_most("extractor.empty_reading", static_cast<double>(out.size()), 0, "an empty reading gave measurements");
+    } catch (const std::exception& e) {
+      const std::string message = e.what();
+      r.at_most("extractor.empty_reading", message.empty() ? 1 : 0, 0,
+                message.empty() ? "rejected without a message" : "rejected: " + message);
+    }
+  }
   for (int s = 0; s < options.samples; ++s) {
     const std::uint64_t seed = options.seed * 7919 + s;
     std::optional<SensorReading> reading = ex.sample_reading(seed);
@@ -287,11 +295,11 @@ void check_extractor(PluginObject& object, const Options& options, Recorder& r) 
   }
 }
 
-void check_source(const PluginDescriptor& descriptor, PluginObject& object, const Options&, Recorder& r) {
+void check_source(const PluginDescriptor& descriptor, PluginObject& object, const Options& options, Recorder& r) {
   auto& source = static_cast<DataSource&>(object);
   PluginArgs args;
   args.instance_name = "mspace_check_twin";
-  args.params = Params::defaults(descriptor.params);
+  args.params = instance_params(descriptor, options);
   std::unique_ptr<PluginObject> twin_object = descriptor.factory(args);
   auto& twin = static_cast<DataSource&>(*twin_object);
   r.at_most("source.initial_pose", source.initial_pose().allFinite() ? 0 : 1, 0, "non-finite initial pose");

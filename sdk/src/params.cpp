@@ -1,5 +1,6 @@
 #include "mspace/params.hpp"
 
+#include <algorithm>
 #include <sstream>
 #include <stdexcept>
 
@@ -36,6 +37,69 @@ std::string format_param(const ParamValue& value) {
       },
       value);
   return os.str();
+}
+
+namespace {
+
+double parse_number(const std::string& name, const std::string& text) {
+  std::size_t used = 0;
+  double value = 0.0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || text.find_first_not_of(" \t", used) != std::string::npos)
+    throw std::invalid_argument("parameter '" + name + "': '" + text + "' is not a number");
+  return value;
+}
+
+void check_range(const ParamSpec& spec, double value) {
+  if (value < spec.min || value > spec.max)
+    throw std::invalid_argument("parameter '" + spec.name + "': " + format_param(value) + " is out of range [" +
+                                format_param(spec.min) + ", " + format_param(spec.max) + "]");
+}
+
+}  // namespace
+
+ParamValue parse_param(const ParamSpec& spec, const std::string& text) {
+  switch (spec.type) {
+    case ParamType::Bool:
+      if (text == "true") return true;
+      if (text == "false") return false;
+      throw std::invalid_argument("parameter '" + spec.name + "': '" + text + "' is not true or false");
+    case ParamType::Int: {
+      const double v = parse_number(spec.name, text);
+      if (v != static_cast<double>(static_cast<std::int64_t>(v)))
+        throw std::invalid_argument("parameter '" + spec.name + "': '" + text + "' is not an integer");
+      check_range(spec, v);
+      return static_cast<std::int64_t>(v);
+    }
+    case ParamType::Double: {
+      const double v = parse_number(spec.name, text);
+      check_range(spec, v);
+      return v;
+    }
+    case ParamType::DoubleList: {
+      std::string body = text;
+      if (!body.empty() && body.front() == '[' && body.back() == ']') body = body.substr(1, body.size() - 2);
+      std::vector<double> values;
+      std::stringstream items(body);
+      for (std::string item; std::getline(items, item, ',');) {
+        values.push_back(parse_number(spec.name, item));
+        check_range(spec, values.back());
+      }
+      if (spec.list_size >= 0 && static_cast<int>(values.size()) != spec.list_size)
+        throw std::invalid_argument("parameter '" + spec.name + "': needs " + std::to_string(spec.list_size) +
+                                    " numbers, got " + std::to_string(values.size()));
+      return values;
+    }
+    case ParamType::String:
+      if (!spec.choices.empty() && std::find(spec.choices.begin(), spec.choices.end(), text) == spec.choices.end())
+        throw std::invalid_argument("parameter '" + spec.name + "': '" + text + "' is not an allowed value");
+      return text;
+  }
+  throw std::invalid_argument("parameter '" + spec.name + "' has an unknown type");
 }
 
 ParamSpec param_double(std::string name, double def, std::string description, double min, double max) {

@@ -20,6 +20,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <iosfwd>
 #include <string>
 #include <vector>
@@ -53,6 +54,9 @@ struct Report {
 struct Options {
   int samples = 8;          ///< random samples per M-space dimension / per check
   std::uint64_t seed = 1;   ///< base seed; every sample seed derives from it
+  /// Parameter values as text, NAME → VALUE, over the plugin's defaults (e.g.
+  /// the data file of a source that has no default for it).
+  std::map<std::string, std::string> params;
 };
 
 /// Runs every check that applies to the plugin's kind. Never throws for a

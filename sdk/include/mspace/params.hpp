@@ -22,6 +22,12 @@ const char* param_type_name(ParamType type);
 
 using ParamValue = std::variant<bool, std::int64_t, double, std::string, std::vector<double>>;
 
+/// Reads a value of spec's type from text ("0.5", "3", "true", "abc",
+/// "[1, 2, 3]" or "1,2,3") and checks its range, list size and choices;
+/// throws std::invalid_argument naming the parameter otherwise.
+struct ParamSpec;
+ParamValue parse_param(const ParamSpec& spec, const std::string& text);
+
 /// Human-readable rendering of a value ("0.5", "true", "[1, 2, 3]", "\"abc\"").
 std::string format_param(const ParamValue& value);
 
