@@ -1,0 +1,87 @@
+// ceiling_lines.hpp — the `ceiling_lines` extractor: straight line segments in
+// an upward-looking camera's image become the horizontal-line measurement of
+// the ICRA paper's eq. 18.
+//
+// Input: a camera SensorReading of the `image_sequence` source (`file` = the
+// image, `values` = the intrinsics row of camera_model.hpp).
+//
+// Pipeline (OpenCV, in the .cpp): Canny edges of the (distorted) image; every
+// edge pixel is located to sub-pixel accuracy across the edge and moved to its
+// undistorted position (a per-camera table) — the points are undistorted, not
+// the image; the probabilistic Hough transform on
+// the undistorted edge points gives rough segments, each refitted by total
+// least squares to the undistorted edge points near it (sub-pixel position and
+// direction, true extent); nearly collinear overlapping segments (the two
+// edges of a thin line, broken pieces) are merged, and the longest `max_lines`
+// are kept.
+//
+// Measurement (kind "ceiling_line"), ICRA eq. 18: v = (v0, v1, v2, v3, v4) with
+// (v0, v1) and (v2, v3) the undistorted start and end point and v4 = f, the
+// focal length ((fx + fy)/2), with the pixel coordinates taken relative to the
+// principal point and rescaled to f:
+//   v0 = (u_s − cx)·f/fx,  v1 = (v_s − cy)·f/fy  (likewise v2, v3 for the end).
+// Then, in this project's camera frame (z = optical axis, x = image u,
+// y = image v), the vectors towards the end points are simply
+//   s = (v0, v1, v4),  e = (v2, v3, v4),
+// which is eq. 18 for a camera frame whose optical axis is z; the paper's
+// (−v0, v4, −v1) is the same with its camera axis along y.
+//
+// Covariance C_v (5×5): each end point has σ_perp = `pixel_sigma` normal to the
+// segment and σ_along = `endpoint_sigma` along it (end points of image lines
+// are much less certain than their position; eqs. 19–22 use only the plane
+// through the camera and the line, which sliding the end points leaves
+// unchanged); v4 has σ = `focal_sigma`. The start point is the end with the
+// smaller v0 (then smaller v1).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "image_sequence/camera_model.hpp"
+#include "mspace/extractor.hpp"
+#include "mspace/params.hpp"
+#include "mspace/plugin.hpp"
+
+namespace mspace::ceiling_lines {
+
+inline constexpr const char* kMeasurementKind = "ceiling_line";
+
+struct LineConfig {
+  double canny_low = 40.0;        ///< Canny hysteresis thresholds (grey-level gradient)
+  double canny_high = 100.0;
+  int hough_threshold = 30;       ///< accumulator votes
+  double hough_theta = 0.0349;    ///< rad (2°); segments are refitted afterwards
+  double min_length = 30.0;       ///< px
+  double max_gap = 3.0;           ///< px
+  int max_lines = 20;
+  double merge_angle = 0.035;     ///< rad
+  double merge_distance = 3.0;    ///< px
+  double pixel_sigma = 1.0;       ///< px, normal to the line
+  double endpoint_sigma = 5.0;    ///< px, along the line
+  double focal_sigma = 1.0;       ///< px
+};
+
+class CeilingLineExtractor : public Extractor {
+ public:
+  static std::vector<ParamSpec> param_specs();
+  explicit CeilingLineExtractor(const PluginArgs& args);
+  explicit CeilingLineExtractor(const LineConfig& config);
+  ~CeilingLineExtractor() override;
+
+  /// Reads the image (grey) and extracts. Throws std::runtime_error naming the
+  /// file when it cannot be read or its size differs from the intrinsics'.
+  void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
+
+  /// The same on an image already in memory (benchmarks, tests).
+  void extract_image(const camera::GreyView& image, const camera::CameraModel& camera,
+                     std::vector<Measurement>& out);
+
+  const LineConfig& config() const { return config_; }
+
+ private:
+  struct Cache;  // undistortion table and work buffers (OpenCV types)
+  LineConfig config_;
+  std::unique_ptr<Cache> cache_;
+};
+
+}  // namespace mspace::ceiling_lines

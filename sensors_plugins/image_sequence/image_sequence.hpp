@@ -1,0 +1,137 @@
+// image_sequence.hpp — the `image_sequence` data source: a recorded (or
+// rendered) ceiling-camera sequence in the folder format of issue 6.
+//
+//   <folder>/images/...       PNG or JPEG, grey or colour
+//   <folder>/frames.csv       t_s,image            (image path relative to the folder)
+//   <folder>/odometry.csv     t_s,x_m,y_m,theta_rad (dead-reckoned robot pose)
+//   <folder>/camera.yaml      width, height, fx, fy, cx, cy,
+//                             distortion: [k1, k2, p1, p2, k3]  (OpenCV model)
+//                             mount: [x, y, z, roll, pitch, yaw] (m, DEGREES; camera pose
+//                             in the robot frame; robot x forward, y left, z up; camera
+//                             z = optical axis, x = image u, y = image v)
+//   <folder>/groundtruth.tum  optional: t x y z qx qy qz qw (evaluation only)
+//
+// In the CSV files blank lines and lines starting with '#' are ignored, and a
+// first line naming the columns (e.g. "t_s,image") is allowed.
+//
+// One DataStep per frame, at the frame's time stamp:
+//   - odometry: the increment (dx, dy, dθ) of planar_odometry.hpp between the
+//     dead-reckoned poses at the previous and this frame (odometry.csv is
+//     interpolated linearly at the frame times; none on the first frame);
+//   - one SensorReading on `channel`: `file` = the image's path, `values` =
+//     the intrinsics row of camera_model.hpp;
+//   - ground_truth: groundtruth.tum interpolated at the frame time, when present
+//     and covering it.
+// Optional planar laser (for fused laser + camera runs; an extension of the
+// issue 6 format, written by the ceiling renderer), both files or neither:
+//   <folder>/laser.yaml  beams, first_bearing_deg, bearing_step_deg, max_range,
+//                        mount: [x, y, z, roll, pitch, yaw] (m, DEGREES)
+//   <folder>/laser.csv   t_s,r_0,...,r_{beams-1}   (m; 0 = no return)
+// A scan is delivered with the first frame at or after its stamp, as a
+// reading on `laser_channel` with one row (range, bearing) per beam in beam
+// order — what the `laser_lines` extractor reads. Its mount, like the
+// camera's, must be repeated in the run configuration.
+// Frames outside the time span of odometry.csv are skipped (with a warning).
+// initial_pose() is the dead-reckoned pose at the first frame: the map frame
+// is odometry's frame.
+//
+// Errors (std::runtime_error) name the file and, where it applies, the line:
+// missing files, malformed lines, non-increasing time stamps, missing or
+// unreadable images (checked when the source is built), a camera.yaml without
+// a required key.
+//
+// The camera's mount is not passed to the kernel (the SDK has no channel for
+// it): the run configuration's sensors.<name>.mount must repeat camera.yaml's.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "camera_model.hpp"
+#include "mspace/source.hpp"
+#include "odometry2d/planar_odometry.hpp"
+
+namespace mspace::image_sequence {
+
+struct Frame {
+  double t = 0.0;
+  std::string image;  ///< path: the folder joined with the CSV's relative path
+  int line = 0;       ///< line in frames.csv (for messages)
+};
+
+struct StampedPose2 {
+  double t = 0.0;
+  Eigen::Vector3d pose = Eigen::Vector3d::Zero();  ///< x, y, θ
+};
+
+struct StampedPose6 {
+  double t = 0.0;
+  Pose6 pose = Pose6::Zero();
+};
+
+/// camera.yaml → camera model (mount converted to a Pose6 in radians).
+camera::CameraModel read_camera_yaml(const std::string& path);
+/// frames.csv; image paths are joined to `folder`.
+std::vector<Frame> read_frames_csv(const std::string& path, const std::string& folder);
+/// odometry.csv.
+std::vector<StampedPose2> read_odometry_csv(const std::string& path);
+/// A TUM trajectory file (t x y z qx qy qz qw).
+std::vector<StampedPose6> read_tum(const std::string& path);
+
+struct LaserScans {
+  std::vector<double> bearings;  ///< rad, one per beam
+  double max_range = 0.0;
+  Pose6 mount = Pose6::Zero();
+  std::vector<double> t;
+  std::vector<Eigen::VectorXd> ranges;  ///< one per scan
+};
+
+/// laser.yaml + laser.csv.
+LaserScans read_laser(const std::string& yaml_path, const std::string& csv_path);
+
+/// The increment x_d that planar_odometry::apply_increment turns `from` into
+/// `to` (both (x, y, θ)): the inverse of eq. 25's f.
+planar_odometry::Increment increment_between(const Eigen::Vector3d& from,
+                                             const Eigen::Vector3d& to);
+
+/// Pose at time t by linear interpolation (angle along the short way);
+/// t must lie within [front().t, back().t].
+Eigen::Vector3d interpolate(const std::vector<StampedPose2>& poses, double t);
+
+class ImageSequence final : public DataSource {
+ public:
+  static std::vector<ParamSpec> param_specs();
+
+  /// Reads and checks the whole folder (not the image pixels).
+  ImageSequence(const std::string& folder, const std::string& channel,
+                Logger& log = null_logger(), const std::string& laser_channel = "laser");
+  explicit ImageSequence(const PluginArgs& args);
+
+  bool next(DataStep& step) override;
+  std::size_t size_hint() const override { return frames_.size(); }
+  Pose6 initial_pose() const override;
+
+  const camera::CameraModel& camera() const { return camera_; }
+  const std::vector<Frame>& frames() const { return frames_; }
+  /// The laser scans (empty when the folder has none).
+  const LaserScans& laser() const { return laser_; }
+
+ private:
+  /// Appends the not yet delivered scans stamped at or before t.
+  void add_scans_until(double t, DataStep& step);
+
+  std::string channel_;
+  camera::CameraModel camera_;
+  Eigen::RowVectorXd camera_row_;
+  std::vector<Frame> frames_;
+  std::vector<StampedPose2> odometry_;
+  std::vector<StampedPose6> ground_truth_;
+  std::string laser_channel_;
+  LaserScans laser_;
+  std::size_t next_frame_ = 0;
+  std::size_t next_scan_ = 0;
+  Eigen::Vector3d previous_odometry_ = Eigen::Vector3d::Zero();
+};
+
+}  // namespace mspace::image_sequence

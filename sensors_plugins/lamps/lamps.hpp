@@ -1,0 +1,71 @@
+// lamps.hpp — the `lamps` extractor: bright, roughly circular blobs in an
+// upward-looking camera's image (round ceiling lamps) become bearing vectors.
+//
+// Input: a camera SensorReading of the `image_sequence` source (`file` = the
+// image, `values` = the intrinsics row of camera_model.hpp).
+//
+// Pipeline (OpenCV, in the .cpp): threshold at `threshold`, outer contours,
+// then keep blobs that
+//   - have an area within [min_area_px, max_area_px],
+//   - are round: minor/major axis ratio of the second moments ≥ min_roundness
+//     and circularity 4π·area/perimeter² ≥ min_circularity (a square has
+//     π/4 ≈ 0.785 at most; elongated light panels fail the axis ratio),
+//   - do not touch the image border (a cut-off lamp has a biased centre).
+// The blob's centroid (distorted pixel) is undistorted with the camera model.
+//
+// Measurement (kind "bearing3d"): v = b, the unit vector from the camera
+// towards the lamp centre in the camera frame (z = optical axis, x = image u,
+// y = image v). C_v (3×3) is the first-order propagation of an isotropic
+// centroid noise of `pixel_sigma` pixels through undistortion and
+// normalisation; it has rank 2 (b stays a unit vector: no variance along b).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "image_sequence/camera_model.hpp"
+#include "mspace/extractor.hpp"
+#include "mspace/params.hpp"
+#include "mspace/plugin.hpp"
+
+namespace mspace::lamps {
+
+inline constexpr const char* kMeasurementKind = "bearing3d";
+
+struct LampConfig {
+  double threshold = 245.0;       ///< grey level of a lamp pixel (0–255)
+  double min_area = 12.0;         ///< px²
+  double max_area = 6000.0;       ///< px²
+  double min_roundness = 0.7;     ///< minor / major axis
+  double min_circularity = 0.8;   ///< 4π·area / perimeter²
+  double pixel_sigma = 0.5;       ///< std of the centroid (px)
+};
+
+class LampExtractor : public Extractor {
+ public:
+  static std::vector<ParamSpec> param_specs();
+  explicit LampExtractor(const PluginArgs& args);
+  explicit LampExtractor(const LampConfig& config);
+  ~LampExtractor() override;
+
+  /// Reads the image (grey) and extracts. Throws std::runtime_error naming the
+  /// file when it cannot be read or its size differs from the intrinsics'.
+  void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
+
+  /// The same on an image already in memory (benchmarks, tests).
+  void extract_image(const camera::GreyView& image, const camera::CameraModel& camera,
+                     std::vector<Measurement>& out);
+
+  const LampConfig& config() const { return config_; }
+
+ private:
+  struct Buffers;  // reused OpenCV work buffers
+  LampConfig config_;
+  std::unique_ptr<Buffers> buffers_;
+};
+
+/// The bearing measurement of a blob centroid at the distorted pixel uv.
+Measurement bearing_measurement(const Eigen::Vector2d& uv, const camera::CameraModel& camera,
+                                double pixel_sigma);
+
+}  // namespace mspace::lamps
