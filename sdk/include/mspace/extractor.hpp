@@ -1,4 +1,4 @@
-// mspace/extractor.hpp — sensor extractors: raw readings → typed measurements.
+// mspace/extractor.hpp — sensor extractors: raw readings → typed measurements v (T-RO eq. 16).
 #pragma once
 
 #include <cstdint>

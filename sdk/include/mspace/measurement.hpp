@@ -1,4 +1,5 @@
-// mspace/measurement.hpp — what extractors produce and features consume.
+// mspace/measurement.hpp — what extractors produce and features consume: the
+// measurement v of T-RO eq. 16 and the sensor pose x_ms (eq. 17) it was taken from.
 #pragma once
 
 #include <cstdint>

@@ -1,4 +1,5 @@
-// mspace/source.hpp — data sources: logs, data sets, simulators.
+// mspace/source.hpp — data sources: logs, data sets, simulators. A step carries the
+// dead-reckoning increment x_d of T-RO eq. 25, the sensor readings and optional ground truth.
 #pragma once
 
 #include <cstdint>
