@@ -120,6 +120,85 @@ Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& 
 
 Vec2 wall_centre(const Eigen::Vector4d& x_f) { return 0.5 * (x_f.head<2>() + x_f.tail<2>()); }
 
+// Eq. 33 with one change: the corner's columns move the whole wall (both
+// ends), not only the shared end, so the wall turns about the corner and the
+// angle column (L/L_s) γ at the free end always means a turn of 1/L_s. With
+// the paper's columns a move of the corner would pivot the wall about the free
+// end, by an angle that changes whenever that end slides — the same reason
+// the unshared wall's rotation is taken about a fixed anchor (see wall_B).
+Eigen::MatrixXd shared_wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends,
+                                   const std::array<bool, 2>& shared, double L_s) {
+  const Geometry g = geometry(x_f);
+  const bool one_shared = shared[kStart] != shared[kEnd];
+  const int free = shared[kStart] ? kEnd : kStart;
+  const bool tangent = one_shared && std::find(ends.begin(), ends.end(), free) != ends.end();
+  Eigen::MatrixXd Bd = Eigen::MatrixXd::Zero(4, (one_shared ? 3 : 4) + (tangent ? 1 : 0));
+  Eigen::Index col = 0;
+  if (one_shared) {
+    Bd.block<2, 1>(2 * free, col++) = (g.L / L_s) * g.gamma;  // the angle about the corner
+    if (tangent) Bd.block<2, 1>(2 * free, col++) = g.t;
+  }
+  for (int e : {kStart, kEnd}) {
+    if (!shared[e]) continue;
+    Bd.block<2, 2>(2 * e, col).setIdentity();
+    if (one_shared) Bd.block<2, 2>(2 * free, col).setIdentity();  // the wall moves with its corner
+    col += 2;
+  }
+  return Bd;
+}
+
+// B B̃ = I: the angle row is the free end's normal move relative to the
+// corner (times L_s/L), the tangent row its tangential move relative to the
+// corner, the corner rows the shared end itself.
+Eigen::MatrixXd shared_wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends,
+                              const std::array<bool, 2>& shared, double L_s) {
+  const Geometry g = geometry(x_f);
+  const bool one_shared = shared[kStart] != shared[kEnd];
+  const int free = shared[kStart] ? kEnd : kStart, corner = 1 - free;
+  const bool tangent = one_shared && std::find(ends.begin(), ends.end(), free) != ends.end();
+  Eigen::MatrixXd B = Eigen::MatrixXd::Zero((one_shared ? 3 : 4) + (tangent ? 1 : 0), 4);
+  Eigen::Index row = 0;
+  if (one_shared) {
+    B.block<1, 2>(row, 2 * free) = (L_s / g.L) * g.gamma.transpose();
+    B.block<1, 2>(row++, 2 * corner) = -(L_s / g.L) * g.gamma.transpose();
+    if (tangent) {
+      B.block<1, 2>(row, 2 * free) = g.t.transpose();
+      B.block<1, 2>(row++, 2 * corner) = -g.t.transpose();
+    }
+  }
+  for (int e : {kStart, kEnd}) {
+    if (!shared[e]) continue;
+    B.block<2, 2>(row, 2 * e).setIdentity();
+    row += 2;
+  }
+  return B;
+}
+
+// The corner c solves n_a·(c − p1) = 0 and n_b·(c − q1) = 0 with the
+// (unnormalised) normals n = perp(p2 − p1). Differentiating,
+//   n_a·dc = n_a·dp1 + (dp2 − dp1)·perp(c − p1),
+// and the same for b; N = (n_a; n_b) is inverted once.
+std::optional<LineIntersection> intersect_lines(const Eigen::Vector4d& a, const Eigen::Vector4d& b,
+                                                double min_angle) {
+  const Vec2 p1 = a.head<2>(), q1 = b.head<2>();
+  const Vec2 da = a.tail<2>() - p1, db = b.tail<2>() - q1;
+  const double cross = da.x() * db.y() - da.y() * db.x();
+  if (!(std::abs(cross) >= std::sin(min_angle) * da.norm() * db.norm())) return std::nullopt;
+  const Vec2 n_a = perp(da), n_b = perp(db);
+  Eigen::Matrix2d N;
+  N << n_a.transpose(), n_b.transpose();
+  const Eigen::Matrix2d N_inv = N.inverse();
+  LineIntersection out;
+  out.point = N_inv * Vec2(n_a.dot(p1), n_b.dot(q1));
+  const Vec2 m_a = perp(out.point - p1), m_b = perp(out.point - q1);
+  Eigen::Matrix<double, 2, 4> rows_a = Eigen::Matrix<double, 2, 4>::Zero(), rows_b = rows_a;
+  rows_a.row(0) << (n_a - m_a).transpose(), m_a.transpose();
+  rows_b.row(1) << (n_b - m_b).transpose(), m_b.transpose();
+  out.J_a = N_inv * rows_a;
+  out.J_b = N_inv * rows_b;
+  return out;
+}
+
 Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends) {
   return wall_B(x_f, ends, wall_centre(x_f));
 }
@@ -175,12 +254,12 @@ const CoordLayout& WallFeature::layout() const { return wall_layout(); }
 
 Eigen::MatrixXd WallFeature::B() const {
   if (mdim_ == 0) return Eigen::MatrixXd(0, 4);
-  return wall_B(x_, ends_, anchor_);
+  return any_shared() ? shared_wall_B(x_, ends_, shared_, L_s_) : wall_B(x_, ends_, anchor_);
 }
 
 Eigen::MatrixXd WallFeature::B_dual() const {
   if (mdim_ == 0) return Eigen::MatrixXd(4, 0);
-  return wall_B_dual(x_, ends_, anchor_);
+  return any_shared() ? shared_wall_B_dual(x_, ends_, shared_, L_s_) : wall_B_dual(x_, ends_, anchor_);
 }
 
 // Eq. 24, then the anchor follows the line: rotation about it leaves it in
@@ -202,9 +281,9 @@ bool WallFeature::innovation(const Eigen::VectorXd& x_o, const Measurement& m, I
   if (m.v[ls::kSb] < p.h[2] - config_.match_margin || m.v[ls::kSa] > p.h[3] + config_.match_margin) return false;
 
   std::vector<int> rows = {0, 1};  // index into h; the same index into v
-  if (mdim_ > 2)
-    for (int e : ends_)
-      if (end_is_real(m.flags, e)) rows.push_back(2 + e);
+  if (mdim_ != 0)
+    for (int e : {kStart, kEnd})
+      if (fixed_end(e) && end_is_real(m.flags, e)) rows.push_back(2 + e);
   const auto n = static_cast<Eigen::Index>(rows.size());
   out.eta.resize(n);
   out.J_eta_o.resize(n, 4);
@@ -286,15 +365,15 @@ void WallFeature::slide_ends() {
       lo = std::min(lo, s);
       hi = std::max(hi, s);
     }
-  if (!in_mspace(kStart)) x_.head<2>() = g.p1 + lo * g.t;
-  if (!in_mspace(kEnd)) x_.tail<2>() = g.p1 + hi * g.t;
+  if (!fixed_end(kStart)) x_.head<2>() = g.p1 + lo * g.t;
+  if (!fixed_end(kEnd)) x_.tail<2>() = g.p1 + hi * g.t;
 }
 
 Eigen::MatrixXd WallFeature::symmetry_directions() const {
   const Geometry g = geometry(x_);
   Eigen::MatrixXd dirs = Eigen::MatrixXd::Zero(4, 0);
   for (int e : {kStart, kEnd}) {
-    if (mdim_ != 0 && in_mspace(e)) continue;
+    if (mdim_ != 0 && fixed_end(e)) continue;
     dirs.conservativeResize(4, dirs.cols() + 1);
     dirs.col(dirs.cols() - 1).setZero();
     dirs.col(dirs.cols() - 1).segment<2>(2 * e) = g.t;
@@ -302,12 +381,49 @@ Eigen::MatrixXd WallFeature::symmetry_directions() const {
   return dirs;
 }
 
+// extra = (measured ends…, start shared, end shared, L_s, anchor x, anchor y).
 SavedFeature WallFeature::save() const {
   const auto n = static_cast<Eigen::Index>(ends_.size());
-  SavedFeature s{x_, mdim_, Eigen::VectorXd(n + 2)};
+  SavedFeature s{x_, mdim_, Eigen::VectorXd(n + 5)};
   for (Eigen::Index i = 0; i < n; ++i) s.extra[i] = ends_[static_cast<std::size_t>(i)];
-  s.extra.tail<2>() = anchor_;
+  s.extra.tail<5>() << (shared_[kStart] ? 1.0 : 0.0), (shared_[kEnd] ? 1.0 : 0.0), L_s_, anchor_;
   return s;
+}
+
+int WallFeature::own_dims() const {
+  const int n_shared = (shared_[kStart] ? 1 : 0) + (shared_[kEnd] ? 1 : 0);
+  const int line_dims = n_shared == 0 ? 2 : n_shared == 1 ? 1 : 0;  // rotation + offset, the angle, none
+  return line_dims + static_cast<int>(ends_.size());
+}
+
+void WallFeature::set_shared(const std::array<bool, 2>& shared, double L_s) {
+  shared_ = shared;
+  L_s_ = L_s;
+  std::erase_if(ends_, [&](int e) { return shared_[e]; });
+  if (mdim_ != 0) mdim_ = own_dims() + 2 * ((shared_[kStart] ? 1 : 0) + (shared_[kEnd] ? 1 : 0));
+}
+
+bool WallFeature::can_share(int block) const { return mdim_ >= 2 && (block == kStart || block == kEnd) && !shared_[block]; }
+
+// T-RO §VI: the corner is where the two lines cross (refused when they cross
+// at less than min_corner_angle: nearly parallel lines have no stable corner).
+std::optional<JoinProposal> WallFeature::propose_join(int block, const Feature& other, int other_block) const {
+  if (!can_share(block) || !(other.layout() == wall_layout()) || other_block < 0 || other_block > 1) return std::nullopt;
+  const std::optional<LineIntersection> c = intersect_lines(x_, other.coords(), config_.min_corner_angle);
+  if (!c) return std::nullopt;
+  return JoinProposal{c->point, c->J_a, c->J_b};
+}
+
+// The end moves onto the corner; the new own dimensions are the new B's own
+// rows applied to the old B̃ (a linear function of the old perturbations).
+Eigen::MatrixXd WallFeature::share_block(int block, const Eigen::VectorXd& value) {
+  if (!can_share(block) || value.size() != 2) throw std::logic_error("wall: share_block on a block that cannot be shared");
+  const Eigen::MatrixXd old_Bd = B_dual();
+  x_.segment<2>(2 * block) = value;
+  std::array<bool, 2> shared = shared_;
+  shared[block] = true;
+  set_shared(shared, any_shared() ? L_s_ : geometry(x_).L);
+  return B().topRows(own_dims()) * old_Bd;
 }
 
 std::optional<Extension> WallFeature::extend(const SensorView& last_view) {
@@ -359,7 +475,7 @@ std::optional<Extension> WallFeature::extend_ends() {
   const Geometry g = geometry(x_);
   std::vector<int> add;
   for (int e : {kStart, kEnd}) {
-    if (in_mspace(e) || !latest.real_end[e]) continue;
+    if (fixed_end(e) || !latest.real_end[e]) continue;
     std::vector<double> tau;
     for (const WallObservation& o : observations_)
       if (o.real_end[e]) tau.push_back(g.t.dot(*o.real_end[e] - g.p1));
@@ -415,6 +531,8 @@ std::vector<ParamSpec> WallType::param_specs() {
       param_int("max_observations", d.max_observations, "most observations kept as dense information", 1.0),
       param_double("match_margin", d.match_margin,
                    "a segment must overlap the wall, give or take this much, to match it (m)", 0.0),
+      param_double("min_corner_angle", d.min_corner_angle * 180.0 / std::numbers::pi,
+                   "two walls share a corner only when they cross at this angle or more (deg)", 0.0, 90.0),
   };
 }
 
@@ -429,6 +547,7 @@ WallType::WallType(const PluginArgs& args) {
   config_.max_path_distance = p.get_double("max_path_distance");
   config_.max_observations = static_cast<int>(p.get_int("max_observations"));
   config_.match_margin = p.get_double("match_margin");
+  config_.min_corner_angle = p.get_double("min_corner_angle") * std::numbers::pi / 180.0;
   if (config_.max_observations < std::max(config_.min_observations, config_.min_end_observations))
     throw std::invalid_argument("wall: max_observations must be at least min_observations and min_end_observations");
 }
@@ -484,16 +603,23 @@ std::optional<FeatureSample> WallType::sample(int dim, std::uint64_t seed) const
 
 std::unique_ptr<Feature> WallType::restore(const SavedFeature& saved) const {
   if (saved.coords.size() != 4) throw std::invalid_argument("wall: saved coordinates must have 4 numbers");
-  const Eigen::Index n_ends = saved.extra.size() - 2;
-  if (n_ends < 0) throw std::invalid_argument("wall: saved extra must hold the measured ends and the anchor (x, y)");
+  const Eigen::Index n_ends = saved.extra.size() - 5;
+  if (n_ends < 0)
+    throw std::invalid_argument(
+        "wall: saved extra must hold the measured ends, the two shared flags, L_s and the anchor (x, y)");
   std::vector<int> ends;
   for (Eigen::Index i = 0; i < n_ends; ++i) {
     const double e = saved.extra[i];
     if (e != 0.0 && e != 1.0) throw std::invalid_argument("wall: saved end points must be 0 (start) or 1 (end)");
     ends.push_back(static_cast<int>(e));
   }
-  auto wall = std::make_unique<WallFeature>(config_, Eigen::Vector4d(saved.coords), saved.mspace_dim, ends);
+  const std::array<bool, 2> shared = {saved.extra[n_ends] != 0.0, saved.extra[n_ends + 1] != 0.0};
+  const int unshared_dim = saved.mspace_dim == 0 ? 0 : 2 + static_cast<int>(ends.size());
+  auto wall = std::make_unique<WallFeature>(config_, Eigen::Vector4d(saved.coords), unshared_dim, ends);
   wall->set_anchor(saved.extra.tail<2>());
+  if (shared[kStart] || shared[kEnd]) wall->set_shared(shared, saved.extra[n_ends + 2]);
+  if (wall->mspace_dim() != saved.mspace_dim)
+    throw std::invalid_argument("wall: saved M-space dimension does not match its ends and shared corners");
   return wall;
 }
 

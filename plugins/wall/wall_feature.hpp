@@ -33,6 +33,16 @@
 //     a real end, within max_end_spread of each other, the latest one now;
 //   - slide the end points that are not in the M-space outwards along the
 //     wall to the longest extent observed (the M-space is untouched).
+//
+// Shared corners (T-RO §VI, eq. 33): an end point of a wall in the map may be
+// shared with an end point of another line feature (two 2-D blocks) when the
+// two lines cross at min_corner_angle or more; the corner is their
+// intersection. The wall's M-space columns are then its own dimensions —
+// the angle about the corner (the free end's normal displacement, scaled by
+// L/L_s, eq. 33; none when both ends are shared) and the free end's
+// tangential position if it was measured — followed by two columns per
+// shared corner (its x, y; they carry the whole wall along). A shared end is
+// never slid.
 #pragma once
 
 #include <Eigen/Core>
@@ -58,6 +68,7 @@ struct WallConfig {
   double max_path_distance = 10.0; ///< m of path "distance"
   int max_observations = 40;
   double match_margin = 0.5;       ///< m
+  double min_corner_angle = 0.5236; ///< rad (30°): smallest crossing angle for a shared corner
 };
 
 enum End : int { kStart = 0, kEnd = 1 };
@@ -78,6 +89,25 @@ Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends,
 Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends, const Eigen::Vector2d& anchor);
 Eigen::MatrixXd wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends);
 Eigen::MatrixXd wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends);
+
+/// Eq. 33: B (rows) and B̃ (columns) of a wall with shared end points:
+/// the angle about the corner (only with exactly one shared end: the free
+/// end's normal move scaled by L/L_s), the free end's tangent if `ends` holds
+/// it, then two columns per shared end in ascending order (the corner's
+/// x, y; with one shared end they move the whole wall).
+Eigen::MatrixXd shared_wall_B(const Eigen::Vector4d& x_f, const std::vector<int>& ends,
+                              const std::array<bool, 2>& shared, double L_s);
+Eigen::MatrixXd shared_wall_B_dual(const Eigen::Vector4d& x_f, const std::vector<int>& ends,
+                                   const std::array<bool, 2>& shared, double L_s);
+
+/// Intersection c of the lines through the end points of a and b, with
+/// J_a = ∂c/∂a and J_b = ∂c/∂b (2 × 4 each). std::nullopt when the lines
+/// cross at less than min_angle.
+struct LineIntersection {
+  Eigen::Vector2d point;
+  Eigen::Matrix<double, 2, 4> J_a, J_b;
+};
+std::optional<LineIntersection> intersect_lines(const Eigen::Vector4d& a, const Eigen::Vector4d& b, double min_angle);
 
 /// How the wall's 2-D M-space (rotation, normal offset; eq. 14) responds to
 /// the measured line (ρ, α) and to the sensor pose x_ms when the wall is
@@ -116,15 +146,27 @@ class WallFeature : public Feature {
   Eigen::MatrixXd symmetry_directions() const override;
   SavedFeature save() const override;
   std::optional<Extension> extend(const SensorView& last_view) override;
+  bool can_share(int block) const override;
+  std::optional<JoinProposal> propose_join(int block, const Feature& other, int other_block) const override;
+  Eigen::MatrixXd share_block(int block, const Eigen::VectorXd& value) override;
 
   const std::vector<int>& mspace_ends() const { return ends_; }
   /// The point the M-space rotation is about (the centre when the line entered).
   const Eigen::Vector2d& anchor() const { return anchor_; }
   void set_anchor(const Eigen::Vector2d& anchor);
   int num_observations() const { return static_cast<int>(observations_.size()); }
+  const std::array<bool, 2>& shared_ends() const { return shared_; }
+  /// Length of the wall when its first end was shared (L_s of eq. 33).
+  double shared_length() const { return L_s_; }
+  /// Restores sharing (map files): the ends shared and L_s.
+  void set_shared(const std::array<bool, 2>& shared, double L_s);
 
  private:
   bool in_mspace(int end) const;
+  /// The end's position is a state dimension (measured or shared): never slid.
+  bool fixed_end(int end) const { return in_mspace(end) || shared_[end]; }
+  bool any_shared() const { return shared_[kStart] || shared_[kEnd]; }
+  int own_dims() const;
   void follow_latest();          ///< tentative: onto the newest observed line
   void slide_ends();             ///< unmeasured ends outwards to the observed extent
   void prune(double path_distance);
@@ -138,6 +180,8 @@ class WallFeature : public Feature {
   /// Rotation pivot of the M-space (a point on the wall). It stays put when
   /// unmeasured ends slide, so δx_p keeps its meaning (see wall_B).
   Eigen::Vector2d anchor_ = Eigen::Vector2d::Zero();
+  std::array<bool, 2> shared_ = {false, false};  ///< start / end shared with another feature
+  double L_s_ = 0.0;                              ///< length at the first join (eq. 33)
 };
 
 class WallType : public FeatureType {

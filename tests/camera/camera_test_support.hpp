@@ -2,6 +2,8 @@
 // camera-frame geometry of the rendered world.
 #pragma once
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -14,10 +16,12 @@
 
 namespace mspace::camera_test {
 
-/// An empty scratch folder under the build tree.
+/// An empty scratch folder under the build tree, private to this process:
+/// CTest runs the test cases of one executable as separate processes in
+/// parallel, and they must not clear each other's folders.
 inline std::filesystem::path scratch_dir(const std::string& name) {
-  const std::filesystem::path dir = std::filesystem::path(MSPACE_BINARY_DIR) / "test_tmp" /
-                                    "camera" / name;
+  const std::filesystem::path dir = std::filesystem::path(MSPACE_BINARY_DIR) / "test_tmp" / "camera" /
+                                    (name + "-" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;

@@ -19,7 +19,9 @@ namespace fs = std::filesystem;
 class VictoriaParkFiles : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::path(MSPACE_BINARY_DIR) / "test-output" / "victoria_park_source";
+    // One folder per test: CTest runs the cases as parallel processes.
+    dir_ = fs::path(MSPACE_BINARY_DIR) / "test-output" / "victoria_park_source" /
+           ::testing::UnitTest::GetInstance()->current_test_info()->name();
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "text");
     fs::create_directories(dir_ / "rfs_slam");

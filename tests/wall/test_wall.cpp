@@ -242,8 +242,6 @@ TEST(Wall, InnovationJacobianAnnihilatesGlobalRotation) {
   dx_f << -x_f[1], x_f[0], -x_f[3], x_f[2];
   const Eigen::Vector2d dp = w.B() * dx_f;
   const Eigen::Vector4d d_eta = p.J * (J_os * dpose + J_of * w.B_dual() * dp);
-  std::cout << "J_os*N " << (J_os * dpose).transpose() << "\nJ_of*Bd*dp " << (J_of * w.B_dual() * dp).transpose()
-            << "\n d_eta " << d_eta.transpose() << "\n";
   EXPECT_LT(std::abs(d_eta[0]), 1e-9);
   EXPECT_LT(std::abs(d_eta[1]), 1e-9);
 }
@@ -266,6 +264,109 @@ TEST(Wall, AnchoredProjectionsAreDualAndMatchEq14AtTheCentre) {
   EXPECT_LT((w.anchor() - anchor).norm(), 1e-3 * 0.05);  // second order
   const Eigen::Vector2d t = (w.coords().tail<2>() - w.coords().head<2>()).normalized();
   EXPECT_NEAR(t.x() * (anchor.y() - w.coords()[1]) - t.y() * (anchor.x() - w.coords()[0]), 0.0, 1e-3);
+}
+
+// ---- Shared corners (T-RO §VI, eq. 33) -------------------------------------
+
+// Every sharing configuration: B B̃ = I; with one shared end the angle column
+// moves only the free end, by (L/L_s) γ (eq. 33); the shared end's columns
+// are the identity (and, with one shared end, move the free end alike).
+TEST(Wall, SharedProjectionMatricesAreDual) {
+  const Eigen::Vector4d x = some_wall();  // L = 5
+  const Eigen::Vector2d t(0.6, 0.8), gamma(0.8, -0.6);
+  struct Case {
+    std::vector<int> ends;
+    std::array<bool, 2> shared;
+    int dims;
+  };
+  for (const Case& c : {Case{{}, {false, true}, 3}, Case{{kStart}, {false, true}, 4}, Case{{}, {true, false}, 3},
+                        Case{{}, {true, true}, 4}}) {
+    const Eigen::MatrixXd B = shared_wall_B(x, c.ends, c.shared, 4.0), Bd = shared_wall_B_dual(x, c.ends, c.shared, 4.0);
+    ASSERT_EQ(Bd.cols(), c.dims);
+    EXPECT_LT((B * Bd - Eigen::MatrixXd::Identity(c.dims, c.dims)).norm(), 1e-12);
+    EXPECT_LT((Bd.rightCols<2>().middleRows<2>(c.shared[kEnd] ? 2 : 0) - Eigen::Matrix2d::Identity()).norm(), 1e-12);
+  }
+  const Eigen::MatrixXd Bd = shared_wall_B_dual(x, {}, {false, true}, 4.0);
+  EXPECT_LT((Bd.col(0).head<2>() - 1.25 * gamma).norm(), 1e-12);
+  EXPECT_LT(Bd.col(0).tail<2>().norm(), 1e-12);
+}
+
+// Lines y = 0 and y = √3 (x − 1) (60°) cross at (1, 0); the Jacobians match
+// central differences; at 20° (< 30°) the join is refused.
+TEST(Wall, CornerIsTheIntersectionOfTheLines) {
+  const Eigen::Vector4d a(-3.0, 0.0, 0.5, 0.0), b(1.2, std::sqrt(3.0) * 0.2, 3.0, std::sqrt(3.0) * 2.0);
+  const std::optional<LineIntersection> c = intersect_lines(a, b, 30.0 * std::numbers::pi / 180.0);
+  ASSERT_TRUE(c.has_value());
+  EXPECT_LT((c->point - Eigen::Vector2d(1.0, 0.0)).norm(), 1e-12);
+  for (int i = 0; i < 4; ++i) {
+    Eigen::Vector4d d = Eigen::Vector4d::Zero();
+    d[i] = kStep;
+    const Eigen::Vector2d ja = (intersect_lines(a + d, b, 0.0)->point - intersect_lines(a - d, b, 0.0)->point) / (2 * kStep);
+    const Eigen::Vector2d jb = (intersect_lines(a, b + d, 0.0)->point - intersect_lines(a, b - d, 0.0)->point) / (2 * kStep);
+    EXPECT_LT((ja - c->J_a.col(i)).norm(), 1e-6) << "a coordinate " << i;
+    EXPECT_LT((jb - c->J_b.col(i)).norm(), 1e-6) << "b coordinate " << i;
+  }
+  const Eigen::Vector4d shallow(0.0, 0.1, 3.0, 0.1 + 3.0 * std::tan(20.0 * std::numbers::pi / 180.0));
+  EXPECT_FALSE(intersect_lines(a, shallow, 30.0 * std::numbers::pi / 180.0).has_value());
+
+  WallFeature wa(WallConfig{}, a, 2, {}), wb(WallConfig{}, b, 2, {});
+  const std::optional<JoinProposal> p = wa.propose_join(kEnd, wb, kStart);
+  ASSERT_TRUE(p.has_value());
+  EXPECT_LT((p->value - Eigen::Vector2d(1.0, 0.0)).norm(), 1e-12);
+  EXPECT_FALSE(wa.propose_join(kEnd, WallFeature(WallConfig{}, shallow, 2, {}), kStart).has_value());
+}
+
+// A dim-2 wall (0, 0) → (4, 0), anchor at the centre, shares its end at (4, 0):
+// γ = (0, −1); the old rotation column moves the start by 2√2 γ and the end
+// by −2√2 γ, the offset column both by γ/√2, so the new angle (the start's
+// normal move relative to the corner, L = L_s) is T = (4√2, 0).
+TEST(Wall, ShareBlockCarriesTheOwnDimensionsOver) {
+  WallFeature w(WallConfig{}, Eigen::Vector4d(0.0, 0.0, 4.0, 0.0), 2, {});
+  ASSERT_TRUE(w.can_share(kEnd));
+  const Eigen::MatrixXd T = w.share_block(kEnd, Eigen::Vector2d(4.0, 0.0));
+  ASSERT_EQ(T.rows(), 1);
+  ASSERT_EQ(T.cols(), 2);
+  EXPECT_NEAR(T(0, 0), 4.0 * std::numbers::sqrt2, 1e-12);
+  EXPECT_NEAR(T(0, 1), 0.0, 1e-12);
+  EXPECT_EQ(w.mspace_dim(), 3);
+  EXPECT_FALSE(w.can_share(kEnd));
+  EXPECT_DOUBLE_EQ(w.shared_length(), 4.0);
+  // The second end: no own dimension is left.
+  const Eigen::MatrixXd T2 = w.share_block(kStart, Eigen::Vector2d(0.0, 0.1));
+  EXPECT_EQ(T2.rows(), 0);
+  EXPECT_EQ(T2.cols(), 3);
+  EXPECT_EQ(w.mspace_dim(), 4);
+  EXPECT_EQ(w.coords(), Eigen::Vector4d(0.0, 0.1, 4.0, 0.0));
+}
+
+// Scan points beyond both ends: the free start slides out to x = −1, the
+// shared end stays at (4, 0), and the angle column grows to (L/L_s) γ = 1.25 γ,
+// so one unit still turns the wall by 1/L_s (eq. 33).
+TEST(Wall, SlidingNeverMovesASharedEnd) {
+  WallFeature w(WallConfig{}, Eigen::Vector4d(0.0, 0.0, 4.0, 0.0), 2, {});
+  w.share_block(kEnd, Eigen::Vector2d(4.0, 0.0));
+  Measurement m;
+  m.kind = ls::kKind;
+  m.v = Eigen::Vector4d(2.0, std::numbers::pi / 2.0, -3.0, 3.0);  // seen from (2, −2), heading 0
+  m.C_v = Eigen::Vector4d(1e-4, 1e-4, 1e-2, 1e-2).asDiagonal();
+  m.dense.resize(2, 7);
+  for (int i = 0; i < 7; ++i) m.dense.col(i) = Eigen::Vector2d(-3.0 + i, 2.0);  // map x from −1 to 5
+  SensorView view;
+  view.x_ms = make_pose2d(2.0, -2.0, 0.0);
+  w.add_dense_information(m, view);
+  EXPECT_LT((w.coords() - Eigen::Vector4d(-1.0, 0.0, 4.0, 0.0)).norm(), 1e-12);
+  EXPECT_LT((w.B_dual().col(0).head<2>() - Eigen::Vector2d(0.0, -1.25)).norm(), 1e-12);
+}
+
+TEST(Wall, SaveRestoreKeepsSharedCorners) {
+  WallType type(WallConfig{});
+  WallFeature w(WallConfig{}, Eigen::Vector4d(0.0, 0.0, 4.0, 0.0), 3, {kStart});
+  w.share_block(kEnd, Eigen::Vector2d(4.0, 0.0));
+  const std::unique_ptr<Feature> back = type.restore(w.save());
+  EXPECT_EQ(back->mspace_dim(), w.mspace_dim());
+  EXPECT_EQ(back->coords(), w.coords());
+  EXPECT_LT((back->B_dual() - w.B_dual()).norm(), 1e-12);
+  EXPECT_FALSE(back->can_share(kEnd));
 }
 
 }  // namespace
