@@ -66,14 +66,12 @@ struct FeatureTypeSlot {
   std::string plugin;
   std::shared_ptr<const LoadedPlugin> library;
   std::shared_ptr<FeatureType> type;
-  std::shared_ptr<Logger> logger;
 };
 
 struct SensorSlot {
   SensorConfig config;
   std::shared_ptr<const LoadedPlugin> library;
   std::shared_ptr<Extractor> extractor;
-  std::shared_ptr<Logger> logger;
   std::vector<int> feeds;  ///< feature-type indices this sensor's measurements may match
 };
 
@@ -180,7 +178,6 @@ class Slam {
   double path_distance_ = 0.0;
   std::int64_t step_ = 0;
   int next_feature_id_ = 1;
-  double gate_cache_p_ = -1.0;
   std::vector<double> gate_chi2_;      ///< by innovation dimension
   std::vector<double> new_feature_chi2_;
   // Reused by associate() for every (feature, measurement) pair.
