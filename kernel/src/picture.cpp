@@ -94,12 +94,21 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   for (Eigen::Index i = 0; i < truth.cols(); ++i)
     cv::drawMarker(img, v.px(truth(0, i), truth(1, i)), {120, 120, 120}, cv::MARKER_CROSS, 9, 1, cv::LINE_AA);
 
-  // A path, broken where consecutive poses are more than a second apart
-  // (gaps in a reference such as GPS are not joined by straight lines).
+  // A path, broken where consecutive poses are much farther apart in time
+  // than usual (more than 1 s and 5 times the median interval): gaps in a
+  // reference such as GPS are not joined by straight lines, while a log with
+  // one pose every few seconds is still drawn as a path.
   auto polyline = [&](const std::vector<StampedPose>& poses, const cv::Scalar& colour, int width) {
+    std::vector<double> dts;
+    for (std::size_t i = 1; i < poses.size(); ++i) dts.push_back(poses[i].t - poses[i - 1].t);
+    double gap = 1.0;
+    if (!dts.empty()) {
+      std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
+      gap = std::max(gap, 5.0 * dts[dts.size() / 2]);
+    }
     std::vector<cv::Point> pts;
     for (std::size_t i = 0; i <= poses.size(); ++i) {
-      if (i == poses.size() || (i > 0 && poses[i].t - poses[i - 1].t > 1.0)) {
+      if (i == poses.size() || (i > 0 && poses[i].t - poses[i - 1].t > gap)) {
         if (pts.size() > 1) cv::polylines(img, pts, false, colour, width, cv::LINE_AA);
         pts.clear();
       }

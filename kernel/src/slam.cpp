@@ -441,6 +441,17 @@ void Slam::update(std::vector<Match>& matches) {
       guarded(config_.estimator.instance, *estimator_lib_, "update", [&] { return estimator_->update(obs); });
   require_finite(dx, "state perturbation", config_.estimator.instance, *estimator_lib_);
 
+  if (log_->enabled(LogLevel::Debug)) {
+    std::string used;
+    for (const Match& match : matches) {
+      const MapFeature& mf = features_[match.feature];
+      if (mf.feature->mspace_dim() == 0) continue;
+      used += " #" + std::to_string(mf.id) + "(dim " + std::to_string(mf.feature->mspace_dim()) +
+              ", d2 " + std::to_string(match.candidate.d2) + ")";
+    }
+    log_->debug("step ", step_, ": update with", used, "; robot correction ",
+                dx.head(static_cast<Eigen::Index>(dofs_.size())).transpose());
+  }
   for (std::size_t i = 0; i < dofs_.size(); ++i) x_r_[dofs_[i]] += dx[static_cast<Eigen::Index>(i)];
   for (int a = kTheta; a <= kPsi; ++a) x_r_[a] = wrap_angle(x_r_[a]);
   for (MapFeature& mf : features_) {  // eq. 24: x_f += B̃ δx_p

@@ -7,7 +7,9 @@
 //   - DataStep::odometry: x_d = (dx, dy, dθ), the odometry motion since the
 //     previous scan expressed in the previous odometry pose's frame — the
 //     increment of the `odometry2d` motion model (planar_odometry.hpp). The
-//     first step has none;
+//     first step has none. With `odometry: scan_matched` the increments are
+//     laser odometry (scan_matching/scan_matcher.hpp), seeded with the wheel
+//     odometry;
 //   - one SensorReading on `channel` whose `values` has one row per beam, in
 //     beam order: (range, bearing) in m and rad in the laser frame, range 0
 //     for a beam with no return (the `laser_lines` extractor relies on the
@@ -44,6 +46,9 @@ class CarmenLogSource final : public DataSource {
   const LogContents& contents() const { return log_; }
 
  private:
+  void scan_match_odometry(const Params& params, Logger& log);
+
+  std::string file_;
   LogContents log_;
   std::string channel_;
   bool use_ground_truth_ = true;
