@@ -98,23 +98,40 @@ std::string expand_environment(const std::string& text) {
 
 // ---------------------------------------------------------------- VictoriaParkSource
 
+std::vector<GpsFix> without_isolated_fixes(const std::vector<GpsFix>& fixes, double max_gap) {
+  std::vector<GpsFix> kept;
+  kept.reserve(fixes.size());
+  for (std::size_t i = 0; i < fixes.size(); ++i) {
+    const bool before = i > 0 && fixes[i].t - fixes[i - 1].t <= max_gap;
+    const bool after = i + 1 < fixes.size() && fixes[i + 1].t - fixes[i].t <= max_gap;
+    if (before || after) kept.push_back(fixes[i]);
+  }
+  return kept;
+}
+
 std::vector<ParamSpec> VictoriaParkSource::param_specs() {
   return {
       param_string("data_dir", "${MSPACE_DATA:-../shared/datasets}/victoria_park",
                    "the data set folder (holding text/ and rfs_slam/); relative paths are relative to the "
                    "working directory"),
       param_string("channel", "laser", "channel of the tree-detection readings"),
+      param_double("gps_isolated_gap", 2.0,
+                   "GPS fixes with no other fix within this many seconds are not used as ground truth (the "
+                   "failing unit's jumps are there, one 141 m off); 0 keeps every fix",
+                   0.0),
   };
 }
 
 VictoriaParkSource::VictoriaParkSource(const PluginArgs& args)
     : VictoriaParkSource(expand_environment(args.params.get_string("data_dir")),
-                         args.params.get_string("channel")) {
+                         args.params.get_string("channel"), args.params.get_double("gps_isolated_gap")) {
   args.log().info("victoria_park: ", dr_.size(), " dead-reckoning samples, ", scans_.size(), " scans, ",
-                  gps_.size(), " GPS fixes, ", times_.size(), " steps");
+                  gps_.size(), " GPS fixes (", isolated_fixes_, " isolated ones left out), ", times_.size(),
+                  " steps");
 }
 
-VictoriaParkSource::VictoriaParkSource(const std::filesystem::path& data_dir, std::string channel)
+VictoriaParkSource::VictoriaParkSource(const std::filesystem::path& data_dir, std::string channel,
+                                       double isolated_gap)
     : channel_(std::move(channel)) {
   if (!std::filesystem::is_directory(data_dir)) {
     throw std::runtime_error("victoria_park: data directory '" + data_dir.string() + "' does not exist (working " +
@@ -122,6 +139,11 @@ VictoriaParkSource::VictoriaParkSource(const std::filesystem::path& data_dir, st
   }
   dr_ = read_dead_reckoning(data_dir / "text" / "aa3_dr.txt");
   gps_ = read_gps(data_dir / "text" / "aa3_gpsx.txt");
+  if (isolated_gap > 0.0) {
+    const std::size_t all = gps_.size();
+    gps_ = without_isolated_fixes(gps_, isolated_gap);
+    isolated_fixes_ = all - gps_.size();
+  }
   scans_ = read_detections(data_dir / "rfs_slam" / "measurements.dat");
   merge_times();
 }

@@ -70,6 +70,11 @@ std::vector<DeadReckoningSample> read_dead_reckoning(const std::filesystem::path
 std::vector<GpsFix> read_gps(const std::filesystem::path& file);
 std::vector<Scan> read_detections(const std::filesystem::path& file);
 
+/// The fixes that have another fix at most `max_gap` seconds before or after
+/// them. The GPS unit was failing (67 gaps longer than 2 s, jumps): a fix
+/// alone between two gaps is where its jumps are (one of them 141 m off).
+std::vector<GpsFix> without_isolated_fixes(const std::vector<GpsFix>& fixes, double max_gap);
+
 /// `${VAR}` and `${VAR:-default}` replaced from the environment (the kernel
 /// expands values written in the YAML, not parameter defaults). Throws
 /// std::invalid_argument for an unset variable without default.
@@ -77,19 +82,24 @@ std::string expand_environment(const std::string& text);
 
 class VictoriaParkSource final : public DataSource {
  public:
-  /// data_dir, channel.
+  /// data_dir, channel, gps_isolated_gap.
   static std::vector<ParamSpec> param_specs();
 
   /// Reads all three files; throws std::runtime_error naming the missing
   /// directory or the malformed line.
   explicit VictoriaParkSource(const PluginArgs& args);
-  VictoriaParkSource(const std::filesystem::path& data_dir, std::string channel);
+  /// `isolated_gap` > 0: GPS fixes with no other fix within that many seconds
+  /// are not delivered (see without_isolated_fixes).
+  VictoriaParkSource(const std::filesystem::path& data_dir, std::string channel, double isolated_gap = 0.0);
 
   bool next(DataStep& step) override;
   std::size_t size_hint() const override { return times_.size(); }
 
   const std::vector<DeadReckoningSample>& dead_reckoning() const { return dr_; }
+  /// The GPS fixes delivered as ground truth.
   const std::vector<GpsFix>& gps() const { return gps_; }
+  /// GPS fixes in the file that were left out as isolated.
+  std::size_t isolated_fixes() const { return isolated_fixes_; }
   const std::vector<Scan>& scans() const { return scans_; }
 
  private:
@@ -98,6 +108,7 @@ class VictoriaParkSource final : public DataSource {
   std::string channel_;
   std::vector<DeadReckoningSample> dr_;
   std::vector<GpsFix> gps_;
+  std::size_t isolated_fixes_ = 0;
   std::vector<Scan> scans_;
   std::vector<double> times_;  ///< distinct step times, ascending
   std::size_t step_ = 0, next_dr_ = 0, next_gps_ = 0, next_scan_ = 0;

@@ -107,6 +107,26 @@ TEST_F(VictoriaParkFiles, MalformedLinesNameFileAndLine) {
   EXPECT_THROW(VictoriaParkSource(dir_ / "missing", "laser"), std::runtime_error);
 }
 
+TEST(VictoriaParkGps, IsolatedFixesAreLeftOut) {
+  // Fixes at 0, 1, 5 (alone: 4 s either side), 9, 9.5, 20 (alone).
+  const std::vector<GpsFix> fixes{{0, 0, 0}, {1, 1, 0}, {5, 140, 0}, {9, 2, 0}, {9.5, 3, 0}, {20, 4, 0}};
+  const std::vector<GpsFix> kept = without_isolated_fixes(fixes, 2.0);
+  ASSERT_EQ(kept.size(), 4u);
+  EXPECT_EQ(kept[0].t, 0.0);
+  EXPECT_EQ(kept[1].t, 1.0);
+  EXPECT_EQ(kept[2].t, 9.0);
+  EXPECT_EQ(kept[3].t, 9.5);
+  EXPECT_EQ(without_isolated_fixes(fixes, 4.0).size(), 5u);  // 5 s now has neighbours; 20 s has not
+}
+
+TEST_F(VictoriaParkFiles, IsolatedGpsFixesAreNotDelivered) {
+  // The two fixes of the files are 1.033 s apart: both kept with a 2 s gap, both isolated with 1 s.
+  EXPECT_EQ(VictoriaParkSource(dir_, "laser", 2.0).gps().size(), 2u);
+  const VictoriaParkSource strict(dir_, "laser", 1.0);
+  EXPECT_EQ(strict.gps().size(), 0u);
+  EXPECT_EQ(strict.isolated_fixes(), 2u);
+}
+
 TEST(VictoriaParkPaths, EnvironmentDefaultsExpand) {
   ::unsetenv("MSPACE_TEST_UNSET_VAR");
   EXPECT_EQ(expand_environment("${MSPACE_TEST_UNSET_VAR:-../shared}/vp"), "../shared/vp");
