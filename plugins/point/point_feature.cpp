@@ -2,7 +2,10 @@
 #include "point_feature.hpp"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <limits>
+#include <numbers>
 #include <random>
 #include <stdexcept>
 
@@ -14,18 +17,43 @@ namespace {
 
 constexpr int kDim = 3;  ///< full M-space dimension = size of x_f
 
+/// Shorter vectors (a predicted point, a measured bearing) have no direction.
+constexpr double kMinNorm = 1e-9;
+/// Depths below this (m) are clamped when weighting a ray in the least squares.
+constexpr double kMinRayDepth = 0.05;
+/// Reweighting passes of the triangulation (the depths settle in two or three).
+constexpr int kTriangulationPasses = 4;
+/// A least-squares information matrix whose smallest eigenvalue is below this
+/// fraction of its largest is treated as singular.
+constexpr double kMinInformationRatio = 1e-12;
+
 const CoordLayout& point_layout() {
   static const CoordLayout layout{BlockKind::Point3D};
   return layout;
 }
 
+double degrees_to_radians(double deg) { return deg * std::numbers::pi / 180.0; }
+
 /// Distance of a sensor-frame point from the sensor's z axis, √(x² + y²).
 double axis_distance(const Eigen::Vector3d& p) { return std::hypot(p.x(), p.y()); }
 
-/// A well-formed measurement of the kind a point understands.
-bool is_point_measurement(const Measurement& m) {
-  return m.kind == kRangeBearingElevation && m.v.size() == kDim && m.C_v.rows() == kDim &&
-         m.C_v.cols() == kDim && m.v.allFinite() && m.C_v.allFinite();
+/// A well-formed 3-vector measurement of `kind` with a 3×3 covariance.
+bool is_measurement_of(const Measurement& m, const char* kind) {
+  return m.kind == kind && m.v.size() == kDim && m.C_v.rows() == kDim && m.C_v.cols() == kDim &&
+         m.v.allFinite() && m.C_v.allFinite();
+}
+
+/// A well-formed range/bearing/elevation measurement.
+bool is_point_measurement(const Measurement& m) { return is_measurement_of(m, kRangeBearingElevation); }
+
+/// A well-formed bearing: also a direction (v not ~0).
+bool is_bearing_measurement(const Measurement& m) {
+  return is_measurement_of(m, kBearing3d) && m.v.norm() >= kMinNorm;
+}
+
+/// A bearing that can become a ray (its covariance has rank 2 across it).
+bool is_usable_bearing(const Measurement& m) {
+  return is_bearing_measurement(m) && tangent_covariance(m.v, m.C_v).has_value();
 }
 
 /// Can v be back-projected to a point with a defined bearing (a positive
@@ -34,7 +62,91 @@ bool is_placeable(const Eigen::Vector3d& v) {
   return v[0] > 0.0 && axis_distance(spherical_to_cartesian(v)) >= kMinAxisDistance;
 }
 
+/// Was `taken` the view of the current step and sensor?
+bool taken_at(const SensorView& taken, const SensorView& now) {
+  return taken.t == now.t && taken.sensor == now.sensor;
+}
+
+/// The map-frame point p expressed through the camera pose x_ms:
+/// p = x_ms ⊕ p_s with p_s = T(p | x_ms) its camera-frame coordinates (eq. 7)
+/// held fixed. J_v = ∂p/∂p_s = R_ms, J_s = ∂p/∂x_ms (placement.hpp).
+placement::Placement attach_to_camera(const Eigen::Vector3d& p, const Pose6& x_ms) {
+  const Eigen::VectorXd p_s = to_sensor_frame(point_layout(), p, x_ms);
+  return placement::place(point_layout(), p_s, Eigen::Matrix3d::Identity(), x_ms);
+}
+
+/// A map-frame covariance C of a point attached to the camera as in
+/// attach_to_camera, in the camera frame: J_vᵀ C J_v (J_v = R_ms is a rotation).
+Eigen::Matrix3d to_camera_frame(const placement::Placement& attached, const Eigen::Matrix3d& C) {
+  return attached.J_v.transpose() * C * attached.J_v;
+}
+
+/// The rays of the stored bearing observations, oldest first.
+std::vector<Ray> rays_of(const std::deque<PointObservation>& observations) {
+  std::vector<Ray> rays;
+  rays.reserve(observations.size());
+  for (const PointObservation& o : observations) rays.push_back(make_ray(o.v, o.C_v, o.view.x_ms));
+  return rays;
+}
+
+/// One least-squares pass of triangulate() with the given ray depths.
+std::optional<Triangulation> solve_rays(const std::vector<Ray>& rays, const std::vector<double>& depth,
+                                        const std::optional<DepthPrior>& prior) {
+  // Normal equations A p = b, written relative to the last camera centre o
+  // (p = o + q) so that far-away map coordinates do not cost precision.
+  const Ray& last = rays.back();
+  const Eigen::Vector3d& o = last.centre;
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Eigen::Matrix3d W = rays[i].information / (depth[i] * depth[i]);
+    A += W;
+    b += W * (rays[i].centre - o);
+  }
+  if (prior) {
+    const double w = 1.0 / (prior->sigma * prior->sigma);
+    A += w * last.direction * last.direction.transpose();
+    b += w * last.direction * prior->depth;
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (A + A.transpose()));
+  const Eigen::Vector3d lambda = eig.eigenvalues();  // ascending
+  if (eig.info() != Eigen::Success || !(lambda[2] > 0.0) || lambda[0] < kMinInformationRatio * lambda[2]) {
+    return std::nullopt;
+  }
+  Triangulation t;
+  t.covariance = eig.eigenvectors() * lambda.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
+  t.point = o + t.covariance * b;
+  t.min_depth = std::numeric_limits<double>::infinity();
+  for (const Ray& r : rays) t.min_depth = std::min(t.min_depth, r.direction.dot(t.point - r.centre));
+  return t;
+}
+
+// ---- conformance samples
+
+/// A uniform draw in [lo, hi) from a seeded engine.
+double draw(std::mt19937_64& rng, double lo, double hi) {
+  return std::uniform_real_distribution<double>(lo, hi)(rng);
+}
+
+/// A sensor pose with a small tilt: the sensor looks along x (range sensor)
+/// or, for an upward camera, along the map's z.
+Pose6 sample_pose(std::mt19937_64& rng) {
+  const double x = draw(rng, -10, 10), y = draw(rng, -10, 10), z = draw(rng, 0, 1);
+  const double theta = draw(rng, -3, 3), phi = draw(rng, -0.2, 0.2), psi = draw(rng, -0.2, 0.2);
+  return make_pose(x, y, z, theta, phi, psi);
+}
+
+/// The view a conformance sample is taken from.
+SensorView sample_view(const Pose6& x_ms) {
+  SensorView view;
+  view.x_ms = x_ms;
+  view.C_ms = Mat6::Identity() * 1e-4;
+  return view;
+}
+
 }  // namespace
+
+// ---------------------------------------------------------------- spherical maps
 
 Eigen::Vector3d cartesian_to_spherical(const Eigen::Vector3d& p, Eigen::Matrix3d* J) {
   const double rho2 = p.x() * p.x() + p.y() * p.y();
@@ -71,6 +183,96 @@ placement::Placement back_project(const Eigen::Vector3d& v, const Pose6& x_ms) {
   return placement::place(point_layout(), p, J_pv, x_ms);
 }
 
+// ---------------------------------------------------------------- bearing geometry
+
+TangentBasis tangent_basis(const Eigen::Vector3d& n) {
+  const double s = n.z() >= 0.0 ? 1.0 : -1.0;
+  const double k = 1.0 / (1.0 + s * n.z());
+  const double x = n.x(), y = n.y();
+  TangentBasis t;
+  t.E.col(0) << 1.0 - k * x * x, -k * x * y, -s * x;
+  t.E.col(1) << -s * k * x * y, s * (1.0 - k * y * y), -y;
+  // ∂k/∂n_z = −s k²; everything else by the product rule.
+  t.dE1 << -2.0 * k * x, 0.0, s * k * k * x * x,  //
+      -k * y, -k * x, s * k * k * x * y,          //
+      -s, 0.0, 0.0;
+  t.dE2 << -s * k * y, -s * k * x, k * k * x * y,  //
+      0.0, -2.0 * s * k * y, k * k * y * y,        //
+      0.0, -1.0, 0.0;
+  return t;
+}
+
+// eq. 16 for a bearing: η = Eᵀ p̂, the predicted direction seen in the
+// measured direction's tangent plane (see the header for the Jacobians).
+bool bearing_innovation(const Eigen::Vector3d& p, const Eigen::Vector3d& v, Innovation& out) {
+  const double range = p.norm(), length = v.norm();
+  if (range < kMinNorm || length < kMinNorm) return false;
+  const Eigen::Vector3d p_hat = p / range, n = v / length;
+  if (p_hat.dot(n) <= 0.0) return false;
+  const TangentBasis t = tangent_basis(n);
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  out.eta = t.E.transpose() * p_hat;
+  out.J_eta_o = t.E.transpose() * (I - p_hat * p_hat.transpose()) / range;
+  Eigen::Matrix<double, 2, 3> J_eta_n;  // ∂η/∂n at fixed p
+  J_eta_n.row(0) = p_hat.transpose() * t.dE1;
+  J_eta_n.row(1) = p_hat.transpose() * t.dE2;
+  out.J_eta_v = J_eta_n * (I - n * n.transpose()) / length;  // n = v/|v|
+  return true;
+}
+
+std::optional<Eigen::Matrix2d> tangent_covariance(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v) {
+  const double length = v.norm();
+  if (!(length >= kMinNorm)) return std::nullopt;
+  // n = v/|v| moves by (I − nnᵀ)δv/|v|; its tangent-plane coordinates are Eᵀδn = Eᵀδv/|v|.
+  const Eigen::Matrix<double, 3, 2> E = tangent_basis(v / length).E;
+  const Eigen::Matrix2d C = E.transpose() * C_v * E / (length * length);
+  const Eigen::Matrix2d C_sym = 0.5 * (C + C.transpose());
+  const Eigen::Vector2d lambda = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(C_sym).eigenvalues();
+  if (!(lambda[1] > 0.0) || lambda[0] < kMinInformationRatio * lambda[1]) return std::nullopt;
+  return C_sym;
+}
+
+Ray make_ray(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v, const Pose6& x_ms) {
+  const std::optional<Eigen::Matrix2d> C_t = tangent_covariance(v, C_v);
+  if (!C_t) {
+    throw std::invalid_argument("point: a bearing needs a non-zero direction and a covariance of rank 2 across it");
+  }
+  const Eigen::Vector3d n = v.normalized();
+  const Eigen::Matrix<double, 3, 2> E = tangent_basis(n).E;
+  const Eigen::Matrix3d R = rotation(x_ms);
+  Ray r;
+  r.centre = x_ms.head<3>();
+  r.direction = R * n;
+  r.information = R * E * C_t->inverse() * E.transpose() * R.transpose();
+  return r;
+}
+
+double max_parallax(const std::vector<Ray>& rays) {
+  double largest = 0.0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    for (std::size_t j = i + 1; j < rays.size(); ++j) {
+      const Eigen::Vector3d& a = rays[i].direction;
+      const Eigen::Vector3d& b = rays[j].direction;
+      largest = std::max(largest, std::atan2(a.cross(b).norm(), a.dot(b)));
+    }
+  }
+  return largest;
+}
+
+std::optional<Triangulation> triangulate(const std::vector<Ray>& rays, const std::optional<DepthPrior>& prior) {
+  if (rays.empty()) return std::nullopt;
+  std::vector<double> depth(rays.size(), prior ? prior->depth : 1.0);
+  std::optional<Triangulation> t;
+  for (int pass = 0; pass < kTriangulationPasses; ++pass) {
+    t = solve_rays(rays, depth, prior);
+    if (!t) return std::nullopt;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      depth[i] = std::max(rays[i].direction.dot(t->point - rays[i].centre), kMinRayDepth);
+    }
+  }
+  return t;
+}
+
 // ---------------------------------------------------------------- PointFeature
 
 PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& v,
@@ -78,6 +280,12 @@ PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& v,
     : config_(config) {
   mdim_ = 0;
   place_at(v, C_v, view);
+}
+
+PointFeature::PointFeature(const PointConfig& config, const Measurement& bearing, const SensorView& view)
+    : config_(config) {
+  mdim_ = 0;
+  place_on_rays({make_ray(bearing.v, bearing.C_v, view.x_ms)}, view);
 }
 
 PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& x_f, int mspace_dim)
@@ -94,11 +302,14 @@ Eigen::MatrixXd PointFeature::B() const { return Eigen::MatrixXd::Identity(mdim_
 
 Eigen::MatrixXd PointFeature::B_dual() const { return Eigen::MatrixXd::Identity(kDim, mdim_); }
 
-// eq. 16: η(x_o, v) = h(x_o) − v, so J_ηo = ∂h/∂x_o and J_ηv = −I.
+// eq. 16. Range/bearing/elevation: η(x_o, v) = h(x_o) − v, so J_ηo = ∂h/∂x_o
+// and J_ηv = −I. Bearing: see bearing_innovation().
 bool PointFeature::innovation(const Eigen::VectorXd& x_o, const Measurement& m,
                               Innovation& out) const {
-  if (!is_point_measurement(m) || x_o.size() != kDim) return false;
+  if (x_o.size() != kDim) return false;
   const Eigen::Vector3d p = x_o;
+  if (is_bearing_measurement(m)) return bearing_innovation(p, m.v, out);
+  if (!is_point_measurement(m)) return false;
   if (axis_distance(p) < kMinAxisDistance) return false;
   Eigen::Matrix3d J_ho;
   const Eigen::Vector3d h = cartesian_to_spherical(p, &J_ho);
@@ -116,6 +327,8 @@ Eigen::MatrixXd PointFeature::gating_covariance() const {
   return gating_cov_;
 }
 
+std::vector<Ray> PointFeature::rays() const { return rays_of(rays_); }
+
 void PointFeature::place_at(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v,
                             const SensorView& view) {
   const placement::Placement bp = back_project(v, view.x_ms);
@@ -124,67 +337,152 @@ void PointFeature::place_at(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v
   gating_cov_ = placement::covariance(bp, C_v, view.C_ms);
 }
 
+void PointFeature::place_on_rays(const std::vector<Ray>& rays, const SensorView& newest) {
+  const std::optional<Triangulation> t =
+      triangulate(rays, DepthPrior{config_.initial_depth, config_.initial_depth_sigma});
+  // With the prior the information is positive definite whenever the newest
+  // ray has a rank-2 covariance, which make_ray has checked.
+  if (!t) throw std::logic_error("point: the least squares of the rays with a depth prior is singular");
+  // The least-squares covariance is relative to the cameras; the newest
+  // camera's own pose uncertainty is added as for a range/bearing/elevation
+  // back-projection, with the point held fixed in that camera's frame.
+  const placement::Placement attached = attach_to_camera(t->point, newest.x_ms);
+  x_ = attached.x_f;
+  gating_cov_ = placement::covariance(attached, to_camera_frame(attached, t->covariance), newest.C_ms);
+}
+
+void PointFeature::store_ray(const PointObservation& observation) {
+  // The newest ray is always kept. The one before it stays only if it is at
+  // least ray_spacing (path distance) beyond its own predecessor: a camera
+  // that stands still or creeps keeps replacing the newest ray.
+  const auto n = rays_.size();
+  const bool replace_newest =
+      n >= 2 && rays_[n - 1].view.path_distance - rays_[n - 2].view.path_distance < config_.ray_spacing;
+  if (replace_newest) rays_.pop_back();
+  rays_.push_back(observation);
+  // Over the limit: drop the second oldest, keeping the first ray (the
+  // widest baseline) and the newest ones.
+  if (static_cast<int>(rays_.size()) > config_.max_rays) rays_.erase(rays_.begin() + 1);
+}
+
 void PointFeature::add_dense_information(const Measurement& m, const SensorView& view) {
-  if (!is_point_measurement(m)) {
-    throw std::invalid_argument("point: add_dense_information got a measurement of kind '" +
-                                m.kind + "' (expected '" + kRangeBearingElevation +
-                                "' with a 3-vector and a 3×3 covariance)");
+  if (is_point_measurement(m)) {
+    if (mdim_ != 0) return;  // initialised: the estimator holds all there is to know
+    observations_.push_back({m.v, m.C_v, view});
+    while (static_cast<int>(observations_.size()) > config_.max_dense) observations_.pop_front();
+    place_at(m.v, m.C_v, view);
+    return;
   }
-  if (mdim_ != 0) return;  // initialised: the estimator holds all there is to know
-  observations_.push_back({m.v, m.C_v, view});
-  while (static_cast<int>(observations_.size()) > config_.max_dense) observations_.pop_front();
-  place_at(m.v, m.C_v, view);
+  if (!is_usable_bearing(m)) {
+    throw std::invalid_argument("point: add_dense_information got a measurement of kind '" + m.kind +
+                                "' (expected '" + kRangeBearingElevation + "' or '" + kBearing3d +
+                                "' with a 3-vector and a 3×3 covariance, of rank 2 across a bearing)");
+  }
+  if (mdim_ != 0) return;
+  store_ray({m.v, m.C_v, view});
+  place_on_rays(rays_of(rays_), view);
 }
 
 std::optional<Extension> PointFeature::extend(const SensorView& last_view) {
-  if (mdim_ != 0 || num_observations() < config_.min_observations) return std::nullopt;
+  if (mdim_ != 0) return std::nullopt;
+  std::optional<Extension> ext = extend_from_range_bearing(last_view);
+  if (!ext) ext = extend_from_rays(last_view);
+  if (ext) {
+    mdim_ = kDim;
+    observations_.clear();
+    rays_.clear();
+  }
+  return ext;
+}
+
+std::optional<Extension> PointFeature::extend_from_range_bearing(const SensorView& last_view) {
+  if (num_observations() < config_.min_observations) return std::nullopt;
   const PointObservation& latest = observations_.back();
-  const bool observed_now = latest.view.t == last_view.t && latest.view.sensor == last_view.sensor;
-  if (!observed_now || latest.v[0] < config_.min_range_for_init || !is_placeable(latest.v)) {
+  if (!taken_at(latest.view, last_view) || latest.v[0] < config_.min_range_for_init || !is_placeable(latest.v)) {
     return std::nullopt;
   }
   // Standard EKF landmark initialisation: δx_f = J_s δx_ms + J_v δv, and with
   // B = I the new M-space perturbations are δx_f itself.
   const placement::Placement bp = back_project(latest.v, latest.view.x_ms);
-  Extension ext = placement::full_extension(bp, latest.C_v, latest.view.sensor);
   x_ = bp.x_f;
-  mdim_ = kDim;
-  observations_.clear();
-  return ext;
+  return placement::full_extension(bp, latest.C_v, latest.view.sensor);
+}
+
+std::optional<Extension> PointFeature::extend_from_rays(const SensorView& last_view) {
+  if (num_rays() < config_.min_rays || !taken_at(rays_.back().view, last_view)) return std::nullopt;
+  const std::vector<Ray> rays = rays_of(rays_);
+  if (max_parallax(rays) < degrees_to_radians(config_.min_parallax_deg)) return std::nullopt;
+  const std::optional<Triangulation> t = triangulate(rays);
+  if (!t || t->min_depth <= kMinRayDepth) return std::nullopt;
+  // p = x_ms ⊕ p_s: δp = J_s δx_ms + R_ms δp_s, and R_ms δp_s has the
+  // triangulation's covariance, so C_new = C_tri (B = I: δx_p = δp).
+  const placement::Placement attached = attach_to_camera(t->point, last_view.x_ms);
+  x_ = attached.x_f;
+  return placement::full_extension(attached, to_camera_frame(attached, t->covariance), last_view.sensor);
 }
 
 // ---------------------------------------------------------------- PointType
 
 std::vector<ParamSpec> PointType::param_specs() {
+  const PointConfig d;
   return {
-      param_int("min_observations", 3,
-                "observations of a tentative point before it is initialised (the first ones "
-                "only confirm it)",
+      param_int("min_observations", d.min_observations,
+                "range/bearing/elevation: observations of a tentative point before it is initialised "
+                "(the first ones only confirm it)",
                 1.0),
-      param_int("max_dense", 10,
-                "most recent observations kept while tentative (≥ min_observations)", 1.0),
-      param_double("min_range_for_init", 0.0,
-                   "the initialising observation must be at least this far (m); 0 = no limit", 0.0),
+      param_int("max_dense", d.max_dense,
+                "range/bearing/elevation: most recent observations kept while tentative (≥ min_observations)",
+                1.0),
+      param_double("min_range_for_init", d.min_range_for_init,
+                   "range/bearing/elevation: the initialising observation must be at least this far (m); "
+                   "0 = no limit",
+                   0.0),
+      param_int("min_rays", d.min_rays, "bearings: rays of a tentative point before it can be triangulated", 2.0),
+      param_int("max_rays", d.max_rays,
+                "bearings: rays kept while tentative (≥ min_rays; the first ray is always kept)", 2.0),
+      param_double("min_parallax_deg", d.min_parallax_deg,
+                   "bearings: largest angle between two rays needed to triangulate (deg)", 0.1, 90.0),
+      param_double("initial_depth", d.initial_depth,
+                   "bearings: depth along the newest ray of a point not yet triangulated (m)", 0.01),
+      param_double("initial_depth_sigma", d.initial_depth_sigma,
+                   "bearings: std of that depth, which sets how far along the ray a tentative point "
+                   "is matched (m)",
+                   0.01),
+      param_double("ray_spacing", d.ray_spacing,
+                   "bearings: path distance between stored rays (m); closer rays replace the newest", 0.0),
   };
 }
 
 PointType::PointType(const PluginArgs& args) {
-  config_.min_observations = static_cast<int>(args.params.get_int("min_observations"));
-  config_.max_dense = static_cast<int>(args.params.get_int("max_dense"));
-  config_.min_range_for_init = args.params.get_double("min_range_for_init");
+  const Params& p = args.params;
+  config_.min_observations = static_cast<int>(p.get_int("min_observations"));
+  config_.max_dense = static_cast<int>(p.get_int("max_dense"));
+  config_.min_range_for_init = p.get_double("min_range_for_init");
+  config_.min_rays = static_cast<int>(p.get_int("min_rays"));
+  config_.max_rays = static_cast<int>(p.get_int("max_rays"));
+  config_.min_parallax_deg = p.get_double("min_parallax_deg");
+  config_.initial_depth = p.get_double("initial_depth");
+  config_.initial_depth_sigma = p.get_double("initial_depth_sigma");
+  config_.ray_spacing = p.get_double("ray_spacing");
   if (config_.max_dense < config_.min_observations) {
     throw std::invalid_argument("point: max_dense (" + std::to_string(config_.max_dense) +
                                 ") must be at least min_observations (" +
                                 std::to_string(config_.min_observations) +
                                 "), or no point is ever initialised");
   }
+  if (config_.max_rays < config_.min_rays) {
+    throw std::invalid_argument("point: max_rays (" + std::to_string(config_.max_rays) +
+                                ") must be at least min_rays (" + std::to_string(config_.min_rays) +
+                                "), or no point is ever triangulated");
+  }
 }
 
 const CoordLayout& PointType::layout() const { return point_layout(); }
 
-std::vector<std::string> PointType::measurement_kinds() const { return {kRangeBearingElevation}; }
+std::vector<std::string> PointType::measurement_kinds() const { return {kRangeBearingElevation, kBearing3d}; }
 
 std::unique_ptr<Feature> PointType::create(const Measurement& m, const SensorView& view) {
+  if (is_usable_bearing(m)) return std::make_unique<PointFeature>(config_, m, view);
   if (!is_point_measurement(m)) return nullptr;
   const Eigen::Vector3d v = m.v;
   if (!is_placeable(v)) return nullptr;
@@ -195,22 +493,42 @@ std::unique_ptr<Feature> PointType::create(const Measurement& m, const SensorVie
 
 std::optional<FeatureSample> PointType::sample(int dim, std::uint64_t seed) const {
   if (dim != 0 && dim != kDim) return std::nullopt;
+  return seed % 2 == 0 ? range_bearing_sample(dim, seed) : bearing_sample(dim, seed);
+}
+
+std::optional<FeatureSample> PointType::range_bearing_sample(int dim, std::uint64_t seed) const {
   std::mt19937_64 rng(seed);
-  auto uniform = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
   FeatureSample s;
-  s.x_ms = make_pose(uniform(-10, 10), uniform(-10, 10), uniform(0, 1), uniform(-3, 3), uniform(-0.2, 0.2),
-                     uniform(-0.2, 0.2));
-  const Eigen::Vector3d v(uniform(2, 8), uniform(-1.5, 1.5), uniform(-0.4, 0.4));
+  s.x_ms = sample_pose(rng);
+  const double r = draw(rng, 2, 8), b = draw(rng, -1.5, 1.5), e = draw(rng, -0.4, 0.4);
+  const Eigen::Vector3d v(r, b, e);
   s.measurement.kind = kRangeBearingElevation;
   s.measurement.v = v;
   s.measurement.C_v = Eigen::Vector3d(0.05 * 0.05, 0.01 * 0.01, 0.02 * 0.02).asDiagonal();
   if (dim == 0) {
-    SensorView view;
-    view.x_ms = s.x_ms;
-    view.C_ms = Mat6::Identity() * 1e-4;
-    s.feature = std::make_unique<PointFeature>(config_, v, s.measurement.C_v, view);
+    s.feature = std::make_unique<PointFeature>(config_, v, s.measurement.C_v, sample_view(s.x_ms));
   } else {
     s.feature = std::make_unique<PointFeature>(config_, back_project(v, s.x_ms).x_f, kDim);
+  }
+  return s;
+}
+
+std::optional<FeatureSample> PointType::bearing_sample(int dim, std::uint64_t seed) const {
+  constexpr double kSigma = 0.002;  // rad: 0.5 px at a focal length of 250 px
+  std::mt19937_64 rng(seed);
+  FeatureSample s;
+  s.x_ms = sample_pose(rng);
+  const double off_axis = draw(rng, 0.0, 0.9), azimuth = draw(rng, -3.1, 3.1), depth = draw(rng, 1.5, 4.0);
+  const Eigen::Vector3d b(std::sin(off_axis) * std::cos(azimuth), std::sin(off_axis) * std::sin(azimuth),
+                          std::cos(off_axis));
+  s.measurement.kind = kBearing3d;
+  s.measurement.v = b;
+  s.measurement.C_v = kSigma * kSigma * (Eigen::Matrix3d::Identity() - b * b.transpose());
+  if (dim == 0) {
+    s.feature = std::make_unique<PointFeature>(config_, s.measurement, sample_view(s.x_ms));
+  } else {
+    const Eigen::VectorXd p_s = depth * b;
+    s.feature = std::make_unique<PointFeature>(config_, to_map_frame(point_layout(), p_s, s.x_ms), kDim);
   }
   return s;
 }

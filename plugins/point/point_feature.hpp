@@ -2,10 +2,15 @@
 //
 // A point feature is one 3-D point, x_f = {x^3D}. Its M-space is either empty
 // (dim 0: a tentative point, not in the estimator) or the whole point
-// (dim 3, B = I). It is measured by "range_bearing_elevation" measurements
-// v = (r, b, e): range, bearing and elevation in the sensor frame.
+// (dim 3, B = I). Two measurement kinds observe it:
 //
-// Life cycle:
+//  * "range_bearing_elevation", v = (r, b, e): range, bearing and elevation in
+//    the sensor frame (a laser or a simulated range sensor);
+//  * "bearing3d", v = unit vector from the sensor towards the point in the
+//    sensor frame, C_v of rank 2 (a camera: the `lamps` extractor sees ceiling
+//    lamps this way, T-RO §IV-E and ICRA §VI).
+//
+// Life cycle with range/bearing/elevation:
 //   create        → tentative point at the back-projection of the first
 //                   measurement, with a gating covariance so it can be matched;
 //   add_dense_…   → each matched observation (v, C_v, sensor view) is stored
@@ -22,6 +27,32 @@
 // feature exists (the association gate already checked they agree); they are
 // not fused, because their errors are correlated with the robot pose through
 // poses the filter no longer holds.
+//
+// Life cycle with bearings only (one image gives a direction, not a point):
+//   create        → tentative point on the ray at `initial_depth`;
+//   add_dense_…   → the dense information is the list of rays: each matched
+//                   bearing with its camera pose (hence the camera centre and
+//                   the map-frame direction with its angular covariance) and
+//                   the path distance. Rays closer than `ray_spacing` of path
+//                   distance to the previous stored ray replace the newest one,
+//                   at most `max_rays` are kept (the first always). The point
+//                   moves to the least-squares intersection of its rays with a
+//                   weak prior `initial_depth` ± `initial_depth_sigma` along
+//                   the newest ray ("consistent with the last observation",
+//                   ICRA §IV), and its gating covariance is that least
+//                   squares' covariance: long along the ray while the depth is
+//                   unknown, so later bearings of the same lamp pass the gate at
+//                   any plausible depth while those of a lamp beside it do not;
+//   extend        → once `min_rays` rays are stored and two of them are at
+//                   least `min_parallax_deg` apart, the point is triangulated
+//                   (rays only, no prior) and enters the estimator at dim 3.
+//
+// Bearing initialisation: the triangulated point p with covariance C_tri is
+// expressed in the frame of the last camera, p = x_ms ⊕ p_s (inverse of
+// eq. 7). The estimator gets J_sensor = ∂p/∂x_ms at fixed p_s (the correlation
+// with the robot, as if the whole triangulation were one measurement taken
+// from the current pose) and C_new = C_tri. The rays' own camera-pose errors
+// relative to the current pose are not in C_new.
 #pragma once
 
 #include <Eigen/Core>
@@ -38,8 +69,9 @@
 
 namespace mspace::point {
 
-/// The measurement kind a point feature understands.
+/// The measurement kinds a point feature understands.
 inline constexpr const char* kRangeBearingElevation = "range_bearing_elevation";
+inline constexpr const char* kBearing3d = "bearing3d";
 
 /// Points closer than this to the sensor's z axis (m) have no defined
 /// bearing: they are neither measured nor initialised.
@@ -47,9 +79,17 @@ inline constexpr double kMinAxisDistance = 1e-3;
 
 /// Settings of the `point` feature type.
 struct PointConfig {
+  // range/bearing/elevation
   int min_observations = 3;         ///< observations before a point is initialised
   int max_dense = 10;               ///< observations kept while tentative
   double min_range_for_init = 0.0;  ///< closer observations do not initialise (m)
+  // bearing only
+  int min_rays = 3;                  ///< rays before a point is triangulated
+  int max_rays = 20;                 ///< rays kept while tentative
+  double min_parallax_deg = 10.0;    ///< largest angle between two rays needed to triangulate
+  double initial_depth = 2.0;        ///< depth along the newest ray until triangulated (m)
+  double initial_depth_sigma = 1.0;  ///< std of that depth prior (m)
+  double ray_spacing = 0.05;         ///< path distance between stored rays (m)
 };
 
 /// h(p) = (|p|, atan2(y, x), atan2(z, √(x²+y²))): range, bearing and
@@ -65,7 +105,83 @@ Eigen::Vector3d spherical_to_cartesian(const Eigen::Vector3d& v, Eigen::Matrix3d
 /// J_v = ∂x_f/∂v and J_s = ∂x_f/∂x_ms (mspace/placement.hpp).
 placement::Placement back_project(const Eigen::Vector3d& v, const Pose6& x_ms);
 
-/// One stored observation of a tentative point (its dense information).
+// ---------------------------------------------------------------- bearing geometry
+
+/// An orthonormal basis E = (e1 e2) of the plane orthogonal to a unit vector
+/// n, smooth in n within each hemisphere (the construction of Duff et al.,
+/// "Building an orthonormal basis, revisited", JCGT 2017; s = +1 for n_z ≥ 0,
+/// −1 otherwise, so E is defined for every n). With k = 1/(1 + s n_z):
+///   e1 = (1 − k n_x², −k n_x n_y, −s n_x),  e2 = (−s k n_x n_y, s(1 − k n_y²), −n_y).
+/// dE1, dE2 are ∂e1/∂n and ∂e2/∂n of these formulas (rows: components of e,
+/// columns: n_x, n_y, n_z).
+struct TangentBasis {
+  Eigen::Matrix<double, 3, 2> E;
+  Eigen::Matrix3d dE1;
+  Eigen::Matrix3d dE2;
+};
+TangentBasis tangent_basis(const Eigen::Vector3d& n);
+
+/// The bearing innovation (eq. 16) of a predicted sensor-frame point p for a
+/// measured direction v: with n = v/|v| and E = tangent_basis(n).E,
+///   η = Eᵀ p/|p|   (2 rows: the predicted direction in the measured
+///                   direction's tangent plane; 0 when p lies on the ray),
+///   J_ηo = Eᵀ (I − p̂p̂ᵀ)/|p|,
+///   J_ηv = (p̂ᵀ ∂e_k/∂n)_k (I − nnᵀ)/|v|.
+/// With C_v of rank 2 across n, J_ηv C_v J_ηvᵀ ≈ EᵀC_v E is full rank: the
+/// rank-2 covariance becomes a 2×2 one. False when |p| or |v| is ~0, or when p
+/// is 90° or more away from v (Eᵀp̂ cannot tell p from −p).
+bool bearing_innovation(const Eigen::Vector3d& p, const Eigen::Vector3d& v, Innovation& out);
+
+/// A bearing observation as a ray in the map frame.
+struct Ray {
+  Eigen::Vector3d centre;       ///< the camera centre
+  Eigen::Vector3d direction;    ///< unit direction towards the point
+  /// Information (inverse covariance) of the direction, rank 2 across it
+  /// (1/rad²): a point at depth d off the ray by δ has χ² = δᵀ·information·δ/d².
+  Eigen::Matrix3d information;
+};
+
+/// The covariance (rad²) of v's direction in its tangent plane, E^T C_v E/|v|²
+/// with E = tangent_basis(v/|v|).E. std::nullopt when it is not positive
+/// definite (C_v of rank < 2 across v) or v is ~0.
+std::optional<Eigen::Matrix2d> tangent_covariance(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v);
+
+/// The ray of bearing v (covariance C_v, sensor frame) seen from x_ms. Throws
+/// std::invalid_argument when tangent_covariance() has none.
+Ray make_ray(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v, const Pose6& x_ms);
+
+/// Largest angle (rad) between the directions of two rays; 0 for fewer than two.
+double max_parallax(const std::vector<Ray>& rays);
+
+/// A depth prior along the last ray: (p − c)·u = depth ± sigma.
+struct DepthPrior {
+  double depth = 0.0;
+  double sigma = 0.0;
+};
+
+/// The result of triangulate().
+struct Triangulation {
+  Eigen::Vector3d point;
+  Eigen::Matrix3d covariance;
+  double min_depth = 0.0;  ///< smallest (p − c_i)·u_i over the rays: > 0 when p is in front of every camera
+};
+
+/// Linear least-squares triangulation: the point p minimising
+///   Σ_i (p − c_i)ᵀ W_i (p − c_i) [+ ((p − c_L)·u_L − depth)²/σ² with a prior],
+/// W_i = information_i / d_i², the perpendicular offsets from the rays weighted
+/// by their angular noise scaled to the depth d_i of p along ray i. The depths
+/// come from the previous solution (a few reweighting passes; the first uses
+/// the prior's depth, or 1). Then p = A⁻¹ Σ W_i c_i and the covariance is A⁻¹,
+/// A = Σ W_i (+ u_L u_Lᵀ/σ²). std::nullopt when there is no ray or A is
+/// (numerically) singular — e.g. parallel rays and no prior.
+std::optional<Triangulation> triangulate(const std::vector<Ray>& rays,
+                                         const std::optional<DepthPrior>& prior = std::nullopt);
+
+// ---------------------------------------------------------------- the feature
+
+/// One stored observation of a tentative point (its dense information): a
+/// range/bearing/elevation measurement or a bearing, with the view it was
+/// taken from (camera pose and its covariance, time, sensor, path distance).
 struct PointObservation {
   Eigen::Vector3d v;
   Eigen::Matrix3d C_v;
@@ -74,11 +190,16 @@ struct PointObservation {
 
 class PointFeature : public Feature {
  public:
-  /// A tentative point (M-space dim 0) at the back-projection of (v, C_v)
-  /// seen from `view`. No observation is stored yet (the kernel calls
-  /// add_dense_information right after creation).
+  /// A tentative point (M-space dim 0) at the back-projection of the
+  /// range/bearing/elevation (v, C_v) seen from `view`. No observation is
+  /// stored yet (the kernel calls add_dense_information right after creation).
   PointFeature(const PointConfig& config, const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v,
                const SensorView& view);
+  /// A tentative point on the ray of a "bearing3d" measurement at
+  /// `initial_depth`, its gating covariance from the depth prior. No ray is
+  /// stored yet. Throws std::invalid_argument for a measurement
+  /// tangent_covariance() rejects.
+  PointFeature(const PointConfig& config, const Measurement& bearing, const SensorView& view);
   /// A point at x_f with M-space dimension 0 or 3 and no stored
   /// observations (map files, FeatureType::restore).
   PointFeature(const PointConfig& config, const Eigen::Vector3d& x_f, int mspace_dim);
@@ -89,72 +210,106 @@ class PointFeature : public Feature {
   Eigen::MatrixXd B() const override;
   Eigen::MatrixXd B_dual() const override;
 
-  /// η = h(x_o) − v with the angles wrapped to (−π, π]; J_ηo = ∂h/∂x_o,
-  /// J_ηv = −I. False for another measurement kind or a point within
+  /// range/bearing/elevation: η = h(x_o) − v with the angles wrapped to
+  /// (−π, π]; J_ηo = ∂h/∂x_o, J_ηv = −I; false for a point within
   /// kMinAxisDistance of the sensor's z axis.
+  /// bearing3d: bearing_innovation(x_o, v) (2 rows).
+  /// False for any other kind or a malformed measurement.
   bool innovation(const Eigen::VectorXd& x_o, const Measurement& m, Innovation& out) const override;
 
-  /// While tentative: the map-frame covariance of the latest back-projection,
-  /// J_v C_v J_vᵀ + J_s C_ms J_sᵀ. Zero-size once initialised.
+  /// While tentative, the map-frame covariance of x_f: for a
+  /// range/bearing/elevation, of the latest back-projection,
+  /// J_v C_v J_vᵀ + J_s C_ms J_sᵀ; for bearings, of the rays' least squares
+  /// with the depth prior plus J_s C_ms J_sᵀ of the newest camera (J_s at a
+  /// point fixed in that camera's frame). Zero-size once initialised.
   Eigen::MatrixXd gating_covariance() const override;
 
-  /// Stores (v, C_v, view), keeping the `max_dense` most recent, and moves a
-  /// tentative point to the new back-projection. Nothing to store once
-  /// initialised. Throws std::invalid_argument for a non-point measurement.
+  /// Stores the observation (see the file comment) and moves a tentative
+  /// point. Nothing to store once initialised. Throws std::invalid_argument
+  /// for a measurement of another kind, a malformed one, or a bearing whose
+  /// covariance has rank < 2 across it.
   void add_dense_information(const Measurement& m, const SensorView& view) override;
 
-  /// Initialises a tentative point to dim 3 once `min_observations` are
-  /// stored and the latest was taken at `last_view` (same time stamp and
-  /// sensor: J_sensor must refer to the current sensor pose) at a range of at
-  /// least `min_range_for_init`. See the file comment for the model.
+  /// Initialises a tentative point to dim 3 (see the file comment): from
+  /// range/bearing/elevation observations once `min_observations` are stored,
+  /// else from rays once `min_rays` are stored with a parallax of at least
+  /// `min_parallax_deg` and a triangulated point in front of every camera.
+  /// Either way the newest observation must have been taken at `last_view`
+  /// (same time stamp and sensor: J_sensor must refer to the current sensor
+  /// pose); range/bearing/elevation also needs a range of at least
+  /// `min_range_for_init`.
   std::optional<Extension> extend(const SensorView& last_view) override;
 
-  /// Observations currently stored (0 once initialised).
+  /// Range/bearing/elevation observations currently stored (0 once initialised).
   int num_observations() const { return static_cast<int>(observations_.size()); }
+  /// Rays currently stored (0 once initialised).
+  int num_rays() const { return static_cast<int>(rays_.size()); }
+  /// The stored rays in the map frame, oldest first.
+  std::vector<Ray> rays() const;
 
  private:
   /// Moves the tentative point to the back-projection of v seen from `view`
   /// and refreshes the gating covariance.
   void place_at(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v, const SensorView& view);
+  /// Moves the tentative point to the least squares of `rays` with the depth
+  /// prior along the last one, seen from `newest`, and refreshes the gating
+  /// covariance.
+  void place_on_rays(const std::vector<Ray>& rays, const SensorView& newest);
+  /// Appends a ray observation, keeping the spacing and the size limit.
+  void store_ray(const PointObservation& observation);
+  std::optional<Extension> extend_from_range_bearing(const SensorView& last_view);
+  std::optional<Extension> extend_from_rays(const SensorView& last_view);
 
   PointConfig config_;
-  std::deque<PointObservation> observations_;
+  std::deque<PointObservation> observations_;  ///< range/bearing/elevation
+  std::deque<PointObservation> rays_;          ///< bearings
   Eigen::Matrix3d gating_cov_ = Eigen::Matrix3d::Zero();
 };
 
 /// The plugin object: creates point features.
 class PointType : public FeatureType {
  public:
-  /// The declared parameters: min_observations, max_dense, min_range_for_init.
+  /// The declared parameters: min_observations, max_dense, min_range_for_init
+  /// (range/bearing/elevation); min_rays, max_rays, min_parallax_deg,
+  /// initial_depth, initial_depth_sigma, ray_spacing (bearings).
   static std::vector<ParamSpec> param_specs();
 
-  /// Throws std::invalid_argument when max_dense < min_observations (the
-  /// point could never be initialised).
+  /// Throws std::invalid_argument when max_dense < min_observations or
+  /// max_rays < min_rays (the point could never be initialised).
   explicit PointType(const PluginArgs& args);
 
   const CoordLayout& layout() const override;
   int max_mspace_dim() const override { return 3; }
+  /// "range_bearing_elevation" and "bearing3d".
   std::vector<std::string> measurement_kinds() const override;
 
-  /// A tentative point from a "range_bearing_elevation" measurement;
-  /// nullptr for other kinds, malformed or non-finite measurements, a
-  /// range ≤ 0, or a point within kMinAxisDistance of the sensor's z axis.
+  /// A tentative point from a "range_bearing_elevation" measurement (nullptr
+  /// for a range ≤ 0 or a point within kMinAxisDistance of the sensor's z
+  /// axis) or from a "bearing3d" one (nullptr when its covariance has rank < 2
+  /// across it); nullptr for other kinds and malformed or non-finite measurements.
   std::unique_ptr<Feature> create(const Measurement& m, const SensorView& view) override;
 
-  /// Conformance sample: a sensor pose with a small tilt, a point 2–8 m away
-  /// in its field of view and the noise-free measurement of it (C_v of the
-  /// default range_bearing extractor). dim 0: a tentative point created from
-  /// that measurement; dim 3: an initialised point. std::nullopt for other dims.
+  /// Conformance sample: a sensor pose with a small tilt and the noise-free
+  /// measurement of a point in its field of view. Even seeds: a
+  /// range/bearing/elevation 2–8 m away (C_v of the default range_bearing
+  /// extractor); odd seeds: a bearing within ~50° of the optical axis, the
+  /// point 1.5–4 m away (C_v of 2 mrad across the bearing). dim 0: a tentative
+  /// point created from that measurement; dim 3: an initialised point.
+  /// std::nullopt for other dims. (One identical bearing fed repeatedly never
+  /// has parallax, so the suite checks the extension on the even seeds.)
   std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const override;
   /// A point from SavedFeature (3 coordinates, dim 0 or 3, no extra state);
   /// throws std::invalid_argument otherwise. The point's own Feature::save()
-  /// is the default one: a point has no state beyond x_f and its dimension
-  /// (and no symmetry directions: every coordinate is measured).
+  /// is the default one: x_f and the dimension (a tentative point's dense
+  /// information is not saved; no symmetry directions: every coordinate is measured).
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
 
   const PointConfig& config() const { return config_; }
 
  private:
+  std::optional<FeatureSample> range_bearing_sample(int dim, std::uint64_t seed) const;
+  std::optional<FeatureSample> bearing_sample(int dim, std::uint64_t seed) const;
+
   PointConfig config_;
 };
 

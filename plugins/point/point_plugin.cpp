@@ -12,8 +12,9 @@ mspace::PluginDescriptor describe() {
   d.name = "point";
   d.kind = mspace::PluginKind::Feature;
   d.description =
-      "A 3-D point (T-RO §IV-E), M-space 0 → 3 with B = I, measured by range/bearing/elevation; "
-      "initialised after min_observations observations";
+      "A 3-D point (T-RO §IV-E), M-space 0 → 3 with B = I, measured by range/bearing/elevation "
+      "(initialised after min_observations observations) or by bearings only, e.g. ceiling lamps "
+      "(triangulated from min_rays rays with min_parallax_deg of parallax)";
   d.params = mspace::point::PointType::param_specs();
   d.factory = [](const mspace::PluginArgs& args) -> std::unique_ptr<mspace::PluginObject> {
     return std::make_unique<mspace::point::PointType>(args);
