@@ -2,7 +2,10 @@
 // map's features shaded by M-space dimension (with 3σ ellipses of their point
 // blocks), the estimated and the true trajectory, a scale bar and a legend.
 // Generic: a feature is drawn from its coordinate blocks only (a point block
-// as a dot, several point blocks as a polyline through them).
+// as a dot, several point blocks as a polyline through them). When features
+// have 3-D points off the ground plane (ceiling lines, lamps) a side view
+// (x against height) is added under the top view, and single such points are
+// drawn as squares.
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -27,6 +30,35 @@ struct View {
             size - margin - static_cast<int>(std::lround((y - min_y) * scale))};
   }
 };
+
+/// The side view under the top view: x as in the top view, height z upwards.
+struct SideView {
+  const View* top = nullptr;
+  double min_z = 0;
+  int bottom = 0;  ///< image row of min_z
+  cv::Point px(double x, double z) const {
+    return {top->px(x, 0).x, bottom - static_cast<int>(std::lround((z - min_z) * top->scale))};
+  }
+};
+
+/// xyz of every 3-D point block of a feature.
+std::vector<Eigen::Vector3d> point3d_blocks(const Feature& f) {
+  std::vector<Eigen::Vector3d> pts;
+  const CoordLayout& layout = f.layout();
+  for (int b = 0; b < layout.num_blocks(); ++b)
+    if (layout.kind(b) == BlockKind::Point3D) pts.push_back(f.coords().segment<3>(layout.offset(b)));
+  return pts;
+}
+
+/// Features with 3-D points off the ground plane (ceiling lines, lamps) get a
+/// side view; a single such point is drawn as a square.
+constexpr double kOffGround = 0.05;  // m
+
+bool off_ground(const Feature& f) {
+  for (const Eigen::Vector3d& p : point3d_blocks(f))
+    if (std::abs(p.z()) > kOffGround) return true;
+  return false;
+}
 
 /// xy of every point block of a feature.
 std::vector<Eigen::Vector2d> point_blocks(const Feature& f) {
@@ -82,7 +114,17 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   v.scale = (size_px - 2.0 * v.margin) / span;
   v.min_x = lo_x - 0.5 * (span - (hi_x - lo_x));
   v.min_y = lo_y - 0.5 * (span - (hi_y - lo_y));
-  cv::Mat img(size_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+  // Heights of the features off the ground plane, for the side view.
+  double lo_z = 0.0, hi_z = 0.0;
+  bool side = false;
+  for (const MapFeature& f : slam.features()) {
+    if (f.feature->mspace_dim() == 0 || !off_ground(*f.feature)) continue;
+    side = true;
+    for (const Eigen::Vector3d& p : point3d_blocks(*f.feature)) lo_z = std::min(lo_z, p.z()), hi_z = std::max(hi_z, p.z());
+  }
+  const int side_px = side ? static_cast<int>(std::lround((hi_z - lo_z) * v.scale)) + 2 * v.margin : 0;
+  cv::Mat img(size_px + side_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+  SideView sv{&v, lo_z, size_px + side_px - v.margin};
 
   // Grid every 10 m (or 1 m for small worlds).
   const double grid = span > 30 ? 10.0 : 1.0;
@@ -135,7 +177,10 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
         cv::line(img, v.px(pts[i].x(), pts[i].y()), v.px(pts[i + 1].x(), pts[i + 1].y()), colour, 2, cv::LINE_AA);
     } else if (pts.size() == 1) {
       const std::optional<double> radius = f.feature->footprint_radius();
-      if (radius && *radius * v.scale >= 2.0)  // drawn to scale when it shows
+      if (off_ground(*f.feature)) {
+        const cv::Point q = v.px(pts[0].x(), pts[0].y());
+        cv::rectangle(img, q - cv::Point(3, 3), q + cv::Point(3, 3), colour, cv::FILLED, cv::LINE_AA);
+      } else if (radius && *radius * v.scale >= 2.0)  // drawn to scale when it shows
         cv::circle(img, v.px(pts[0].x(), pts[0].y()), static_cast<int>(std::lround(*radius * v.scale)), colour, 2,
                    cv::LINE_AA);
       else
@@ -153,6 +198,29 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     }
   }
 
+  if (side) {
+    // Side view: x against height, the ground (z = 0) and the path on it.
+    cv::line(img, {0, size_px}, {size_px, size_px}, {180, 180, 180}, 1);
+    cv::line(img, sv.px(v.min_x, 0), sv.px(v.min_x + span, 0), {235, 235, 235}, 1);
+    for (double gz = std::ceil(lo_z); gz <= hi_z; gz += 1.0)
+      if (gz != 0.0) cv::line(img, sv.px(v.min_x, gz), sv.px(v.min_x + span, gz), {235, 235, 235}, 1);
+    for (const StampedPose& p : slam.trajectory()) img.at<cv::Vec3b>(sv.px(p.pose[kX], 0)) = {200, 80, 30};
+    for (const MapFeature& f : slam.features()) {
+      const int dim = f.feature->mspace_dim();
+      if (dim == 0 || !off_ground(*f.feature)) continue;
+      const cv::Scalar colour = dim_colour(dim, slam.feature_types()[f.type].type->max_mspace_dim());
+      const std::vector<Eigen::Vector3d> pts = point3d_blocks(*f.feature);
+      for (std::size_t i = 0; i + 1 < pts.size(); ++i)
+        cv::line(img, sv.px(pts[i].x(), pts[i].z()), sv.px(pts[i + 1].x(), pts[i + 1].z()), colour, 2, cv::LINE_AA);
+      if (pts.size() == 1) {
+        const cv::Point q = sv.px(pts[0].x(), pts[0].z());
+        cv::rectangle(img, q - cv::Point(3, 3), q + cv::Point(3, 3), colour, cv::FILLED, cv::LINE_AA);
+      }
+    }
+    cv::putText(img, "side view: x (m) against height z (m), grid every 1 m", {10, size_px + 18},
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
+  }
+
   // Shared coordinates (e.g. a corner two features meet at) as squares.
   for (const SharedCoordinate& c : slam.shared_coordinates()) {
     const Eigen::VectorXd p = slam.shared_value(c);
@@ -163,7 +231,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
 
   // Scale bar and legend.
   const double bar = grid;
-  const cv::Point bar0(v.margin, size_px - v.margin / 2);
+  const cv::Point bar0(v.margin, size_px - v.margin / 2);  // under the top view
   cv::line(img, bar0, bar0 + cv::Point(static_cast<int>(bar * v.scale), 0), {0, 0, 0}, 2);
   cv::putText(img, std::to_string(static_cast<int>(bar)) + " m", bar0 + cv::Point(5, -6), cv::FONT_HERSHEY_SIMPLEX,
               0.45, {0, 0, 0}, 1, cv::LINE_AA);
