@@ -1,0 +1,149 @@
+// hline_feature.hpp — the `hline` feature type: a horizontal line on the
+// ceiling seen by an upward-looking camera (ICRA §V, eqs. 17–22; T-RO §IV-G,
+// Table II).
+//
+// x_f = {p1^3D, p2^3D}, the end points, always at the same height (the
+// horizontal constraint is kept by B̃, see hline_B_dual).
+//
+// M-space (rows of B, hline_geometry.hpp):
+//   dim 0: tentative, not in the estimator;
+//   dim 1: the direction only — a rotation in the xy plane about an anchor
+//          (the centre when the direction entered; eq. 17);
+//   dim 3: + the offset in xy normal to the line and the height (eq. 21).
+// The position along the line is never in the M-space: the end points slide
+// to the longest observed extent.
+//
+// Measured by "ceiling_line" (sensors_plugins/ceiling_lines): the plane
+// through the camera centre and the observed segment, normal c. The
+// innovation is η = c·t̂ (eq. 20) at dims 0 and 1 and (c·t̂, c·r̂) (eqs. 20,
+// 22) at dim 3. A measurement does not belong to the line when it is behind
+// the camera, when its segment does not overlap the line (give or take
+// match_margin) or, while the position is a guess (dims 0, 1), when the
+// plane misses the predicted centre by more than match_angle.
+//
+// Dense information: per observation, the plane (c and its covariance in the
+// map), the camera centre, the rays to the two end points (map) and the path
+// distance; observations older than max_path_distance are pruned.
+//   0 → 1  after min_observations whose directions agree within
+//          max_direction_spread: the weighted mean direction, with the
+//          variance from C_v (inflated by the observed spread) and J_sensor
+//          for all observations turning with the sensor (a heading error
+//          turns the line with it);
+//   1 → 3  once the camera centres spread min_baseline normal to the line:
+//          offset and height by least squares on the planes, with its
+//          covariance, J_sensor (everything moving rigidly with the sensor)
+//          and J_own (the dependence on the direction in the M-space);
+//   dims 0, 1: the line follows the newest plane at a guessed height
+//          (initial_height above the camera), not in the M-space;
+//   all dims: the end points slide along the line to the extent of the
+//          observed end-point rays (their closest points on the line).
+#pragma once
+
+#include <Eigen/Core>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hline_geometry.hpp"
+#include "mspace/feature.hpp"
+#include "mspace/params.hpp"
+
+namespace mspace::hline {
+
+struct HLineConfig {
+  int min_observations = 3;
+  double max_direction_spread = 0.035;  ///< rad (2°)
+  double initial_height = 2.0;          ///< m above the camera
+  double min_baseline = 0.5;            ///< m normal to the line
+  double max_path_distance = 10.0;      ///< m of path "distance"
+  int max_observations = 100;
+  double match_angle = 0.087;  ///< rad (5°)
+  double match_margin = 0.5;   ///< m
+};
+
+/// One observation kept as dense information.
+struct HLineObservation {
+  PlaneObservation plane;  ///< c, its covariance, the camera centre (map)
+  Vec3 ray_s, ray_e;       ///< unit rays to the end points (map)
+  SensorView view;         ///< time, sensor, pose and path distance
+};
+
+class HLineFeature : public Feature {
+ public:
+  /// A line with the given end points (their heights must agree) and
+  /// M-space dimension 0, 1 or 3; `anchor` is the point (x, y) the M-space
+  /// is taken about (projected onto the line). Throws std::invalid_argument
+  /// otherwise.
+  HLineFeature(const HLineConfig& config, const Vec6& x_f, int mspace_dim, const Vec2& anchor);
+
+  const CoordLayout& layout() const override;
+  Eigen::MatrixXd B() const override;
+  Eigen::MatrixXd B_dual() const override;
+  bool innovation(const Eigen::VectorXd& x_o, const Measurement& m, Innovation& out) const override;
+  /// Dim 0: the direction's variance as a turn of x_f about the centre; none otherwise.
+  Eigen::MatrixXd gating_covariance() const override;
+  /// Eq. 24, then the two heights are made one number and the anchor follows the line.
+  void apply_perturbation(const Eigen::VectorXd& dx_p) override;
+  void add_dense_information(const Measurement& m, const SensorView& view) override;
+  /// Each end point along the line; at dims 0, 1 also the translations along n and z.
+  Eigen::MatrixXd symmetry_directions() const override;
+  /// Half the length.
+  std::optional<double> footprint_radius() const override;
+  /// extra = the anchor (x, y).
+  SavedFeature save() const override;
+  std::optional<Extension> extend(const SensorView& last_view) override;
+
+  const Vec2& anchor() const { return anchor_; }
+  int num_observations() const { return static_cast<int>(observations_.size()); }
+  const std::deque<HLineObservation>& observations() const { return observations_; }
+
+ private:
+  std::vector<PlaneObservation> planes() const;
+  void prune(double path_distance);
+  /// Dims 0, 1: onto the newest plane at the guessed height, with direction t.
+  void follow_latest(const Vec2& t);
+  /// x_f of the line through `point` (x, y) at height z with direction t,
+  /// its ends at the extent of the stored end-point rays' closest points on
+  /// it; with `grow` (or when no ray gives an extent) the current ends,
+  /// projected onto it, count too.
+  Vec6 line_at(const Vec2& point, const Vec2& t, double z, bool grow) const;
+  std::optional<Extension> extend_direction();
+  std::optional<Extension> extend_position();
+
+  HLineConfig config_;
+  Vec2 anchor_ = Vec2::Zero();
+  std::deque<HLineObservation> observations_;
+  Eigen::Matrix<double, 6, 6> gating_cov_ = Eigen::Matrix<double, 6, 6>::Zero();
+};
+
+class HLineType : public FeatureType {
+ public:
+  static std::vector<ParamSpec> param_specs();
+  explicit HLineType(const PluginArgs& args);
+  explicit HLineType(const HLineConfig& config) : config_(config) {}
+
+  const CoordLayout& layout() const override;
+  int max_mspace_dim() const override { return 3; }
+  std::vector<int> reachable_dims() const override { return {0, 1, 3}; }
+  std::vector<std::string> measurement_kinds() const override;
+  /// A tentative line in the measured plane at the guessed height.
+  std::unique_ptr<Feature> create(const Measurement& m, const SensorView& view) override;
+  /// A line 1–3 m long, 1.5–2.5 m above a slightly tilted camera near it,
+  /// and its noise-free measurement (f = 500 px, the extractor's C_v).
+  std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const override;
+  std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
+
+  const HLineConfig& config() const { return config_; }
+
+ private:
+  HLineConfig config_;
+};
+
+/// The ceiling_line measurement of the segment (p1, p2) (map) seen from
+/// x_ms with focal length f: v = (f x1/z1, f y1/z1, f x2/z2, f y2/z2, f),
+/// start = the end with the smaller v0. Used by sample() and the tests.
+Eigen::VectorXd project_line(const Vec6& x_f, const Pose6& x_ms, double f);
+
+}  // namespace mspace::hline
