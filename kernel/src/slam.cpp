@@ -264,17 +264,23 @@ SensorView Slam::sensor_view(int sensor_index, double t) const {
   return view;
 }
 
+// Every sensor on the reading's channel extracts from it (one camera can feed
+// a line extractor and a lamp extractor), one after the other, each with its
+// own association and update.
 void Slam::process_reading(const SensorReading& reading, std::vector<ReadingWork>& work) {
   ++stats_.readings;
-  int sensor_index = -1;
-  for (std::size_t i = 0; i < sensors_.size(); ++i)
-    if (sensors_[i].config.channel == reading.channel) sensor_index = static_cast<int>(i);
-  if (sensor_index < 0) {
-    if (stats_.unknown_channel_readings++ == 0)
-      log_->warn("reading on channel '", reading.channel,
-                 "' has no sensor in the configuration; such readings are skipped (counted in the summary)");
-    return;
+  bool known = false;
+  for (std::size_t i = 0; i < sensors_.size(); ++i) {
+    if (sensors_[i].config.channel != reading.channel) continue;
+    known = true;
+    process_sensor_reading(reading, static_cast<int>(i), work);
   }
+  if (!known && stats_.unknown_channel_readings++ == 0)
+    log_->warn("reading on channel '", reading.channel,
+               "' has no sensor in the configuration; such readings are skipped (counted in the summary)");
+}
+
+void Slam::process_sensor_reading(const SensorReading& reading, int sensor_index, std::vector<ReadingWork>& work) {
   const SensorSlot& sensor = sensors_[sensor_index];
   ReadingWork w;
   w.sensor = sensor_index;

@@ -144,6 +144,7 @@ class Slam {
 
   void predict(const DataStep& data);
   void process_reading(const SensorReading& reading, std::vector<ReadingWork>& work);
+  void process_sensor_reading(const SensorReading& reading, int sensor_index, std::vector<ReadingWork>& work);
   void associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
                  ReadingWork& work);
   void update(std::vector<Match>& matches);
