@@ -7,118 +7,13 @@
 #include <stdexcept>
 #include <string>
 
+#include "mspace/estimator_support.hpp"
+
 namespace mspace::ekf {
 
-namespace {
-
 using Eigen::Index;
-
-std::string size_text(Index rows, Index cols) {
-  return std::to_string(rows) + " x " + std::to_string(cols);
-}
-
-/// Throws std::invalid_argument naming the first row of `m` holding a NaN or inf.
-template <class Derived>
-void require_finite(const Eigen::MatrixBase<Derived>& m, const std::string& context,
-                    const char* name) {
-  for (Index r = 0; r < m.rows(); ++r) {
-    if (!m.row(r).allFinite()) {
-      throw std::invalid_argument(context + ": " + name + " row " + std::to_string(r) +
-                                  " is not finite");
-    }
-  }
-}
-
-void require_size(const Eigen::MatrixXd& m, Index rows, Index cols, const std::string& context,
-                  const char* name) {
-  if (m.rows() != rows || m.cols() != cols) {
-    throw std::invalid_argument(context + ": " + name + " is " + size_text(m.rows(), m.cols()) +
-                                ", expected " + size_text(rows, cols));
-  }
-}
-
-/// Every index in [0, n); with `distinct`, no index twice.
-void require_indices(const std::vector<int>& idx, int n, const std::string& context,
-                     bool distinct) {
-  for (int i : idx) {
-    if (i < 0 || i >= n) {
-      throw std::invalid_argument(context + ": index " + std::to_string(i) +
-                                  " is out of range [0, " + std::to_string(n) + ")");
-    }
-  }
-  if (!distinct) return;
-  std::vector<int> sorted = idx;
-  std::sort(sorted.begin(), sorted.end());
-  const auto twice = std::adjacent_find(sorted.begin(), sorted.end());
-  if (twice != sorted.end()) {
-    throw std::invalid_argument(context + ": index " + std::to_string(*twice) +
-                                " appears more than once");
-  }
-}
-
-/// Sizes, indices and finiteness of one observation η ≈ J δx[idx] + noise.
-void validate(const LinearizedObservation& o, int n, const std::string& context) {
-  const Index m = o.J.rows();
-  if (o.J.cols() != static_cast<Index>(o.idx.size())) {
-    throw std::invalid_argument(context + ": J has " + std::to_string(o.J.cols()) +
-                                " columns but idx has " + std::to_string(o.idx.size()) +
-                                " indices");
-  }
-  if (o.eta.size() != m) {
-    throw std::invalid_argument(context + ": eta has " + std::to_string(o.eta.size()) +
-                                " rows but J has " + std::to_string(m));
-  }
-  require_size(o.C_eta, m, m, context, "C_eta");
-  require_indices(o.idx, n, context, true);
-  require_finite(o.eta, context, "eta");
-  require_finite(o.J, context, "J");
-  require_finite(o.C_eta, context, "C_eta");
-}
-
-/// All observations of one step as one measurement over the union I of their
-/// state indices: η = J_I δx[I] + noise with block-diagonal C_eta.
-struct StackedObservation {
-  std::vector<int> union_idx;  ///< I, sorted ascending
-  Eigen::VectorXd eta;         ///< m
-  Eigen::MatrixXd J;           ///< m × |I|
-  Eigen::MatrixXd C_eta;       ///< m × m
-};
-
-std::vector<int> union_of_indices(const std::vector<LinearizedObservation>& obs) {
-  std::vector<int> all;
-  for (const auto& o : obs) all.insert(all.end(), o.idx.begin(), o.idx.end());
-  std::sort(all.begin(), all.end());
-  all.erase(std::unique(all.begin(), all.end()), all.end());
-  return all;
-}
-
-StackedObservation stack(const std::vector<LinearizedObservation>& obs, int n) {
-  Index m = 0;
-  for (std::size_t i = 0; i < obs.size(); ++i) {
-    validate(obs[i], n, "ekf update: observation " + std::to_string(i));
-    m += obs[i].eta.size();
-  }
-  StackedObservation s;
-  s.union_idx = union_of_indices(obs);
-  s.eta.resize(m);
-  s.J = Eigen::MatrixXd::Zero(m, static_cast<Index>(s.union_idx.size()));
-  s.C_eta = Eigen::MatrixXd::Zero(m, m);
-  Index row = 0;
-  for (const auto& o : obs) {
-    const Index rows = o.eta.size();
-    s.eta.segment(row, rows) = o.eta;
-    s.C_eta.block(row, row, rows, rows) = o.C_eta;
-    for (std::size_t c = 0; c < o.idx.size(); ++c) {
-      const auto pos =
-          std::lower_bound(s.union_idx.begin(), s.union_idx.end(), o.idx[c]) - s.union_idx.begin();
-      s.J.block(row, pos, rows, 1) = o.J.col(static_cast<Index>(c));
-    }
-    row += rows;
-  }
-  return s;
-}
-
-}  // namespace
+using estimator_support::require_indices;
+using estimator_support::size_text;
 
 EkfFilter::EkfFilter(int initial_capacity) : initial_capacity_(initial_capacity) {
   if (initial_capacity < 1) {
@@ -128,9 +23,7 @@ EkfFilter::EkfFilter(int initial_capacity) : initial_capacity_(initial_capacity)
 }
 
 void EkfFilter::reset(const Eigen::MatrixXd& P_rr) {
-  const std::string context = "ekf reset";
-  require_size(P_rr, P_rr.rows(), P_rr.rows(), context, "P_rr");
-  require_finite(P_rr, context, "P_rr");
+  estimator_support::validate_reset(P_rr, "ekf reset");
   k_ = static_cast<int>(P_rr.rows());
   n_ = k_;
   store_.resize(std::max(k_, initial_capacity_), std::max(k_, initial_capacity_));
@@ -138,11 +31,7 @@ void EkfFilter::reset(const Eigen::MatrixXd& P_rr) {
 }
 
 void EkfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {
-  const std::string context = "ekf predict";
-  require_size(J_rr, k_, k_, context, "J_rr");
-  require_size(Q, k_, k_, context, "Q");
-  require_finite(J_rr, context, "J_rr");
-  require_finite(Q, context, "Q");
+  estimator_support::validate_prediction(J_rr, Q, k_, "ekf predict");
 
   // eq. 26: C_rr ← J_rr C_rr J_rrᵀ + Q  (Q = J_rd C_d J_rdᵀ).
   const Eigen::MatrixXd C_rr = store_.topLeftCorner(k_, k_).selfadjointView<Eigen::Lower>();
@@ -155,7 +44,8 @@ void EkfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {
 }
 
 Eigen::VectorXd EkfFilter::update(const std::vector<LinearizedObservation>& obs) {
-  const StackedObservation s = stack(obs, n_);
+  const estimator_support::StackedObservation s =
+      estimator_support::stack_observations(obs, n_, "ekf update");
   Eigen::VectorXd dx = Eigen::VectorXd::Zero(n_);
   if (s.eta.size() == 0) return dx;
 
@@ -185,13 +75,8 @@ Eigen::VectorXd EkfFilter::update(const std::vector<LinearizedObservation>& obs)
 }
 
 int EkfFilter::augment(const StateAugmentation& aug) {
-  const std::string context = "ekf augment";
+  estimator_support::validate_augmentation(aug, n_, "ekf augment");
   const auto added = static_cast<int>(aug.C_new.rows());
-  require_size(aug.C_new, added, added, context, "C_new");
-  require_size(aug.J, added, static_cast<Index>(aug.idx.size()), context, "J");
-  require_indices(aug.idx, n_, context, false);
-  require_finite(aug.J, context, "J");
-  require_finite(aug.C_new, context, "C_new");
 
   const int first = n_;
   if (added == 0) return first;
@@ -222,14 +107,7 @@ Eigen::MatrixXd EkfFilter::cross(const std::vector<int>& rows, const std::vector
 }
 
 void EkfFilter::remove(std::vector<int> idx) {
-  require_indices(idx, n_, "ekf remove", true);
-  for (int i : idx) {
-    if (i < k_) {
-      throw std::invalid_argument("ekf remove: index " + std::to_string(i) +
-                                  " is a robot pose coordinate (robot dimension " +
-                                  std::to_string(k_) + ")");
-    }
-  }
+  estimator_support::validate_removal(idx, n_, k_, "ekf remove");
   std::sort(idx.begin(), idx.end());
   std::vector<int> keep;
   keep.reserve(static_cast<std::size_t>(n_) - idx.size());

@@ -1,0 +1,547 @@
+// cekf_filter.cpp — the compressed EKF (Guivant & Nebot 2001) on the M-space
+// state of T-RO 2007 §V-B, eqs. 23–32. See cekf_filter.hpp for the partition
+// into active rows A and passive rows B and the invariants
+//   P_AB = Φ G,   P_BB = P⁰_BB − Gᵀ Ψ G.                                  (I)
+#include "cekf_filter.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Dense>
+#include <algorithm>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+#include "mspace/estimator_support.hpp"
+
+namespace mspace::cekf {
+
+namespace {
+
+using Eigen::Index;
+namespace support = mspace::estimator_support;
+
+constexpr Index kInitialCapacity = 64;
+
+/// Makes `m` at least rows × cols, doubling each dimension that is too small;
+/// keeps the top-left used_rows × used_cols block, new entries are zero.
+void grow(Eigen::MatrixXd& m, Index rows, Index cols, Index used_rows, Index used_cols) {
+  if (rows <= m.rows() && cols <= m.cols()) return;
+  const Index new_rows = rows <= m.rows() ? m.rows() : std::max(rows, 2 * m.rows());
+  const Index new_cols = cols <= m.cols() ? m.cols() : std::max(cols, 2 * m.cols());
+  Eigen::MatrixXd bigger = Eigen::MatrixXd::Zero(new_rows, new_cols);
+  bigger.topLeftCorner(used_rows, used_cols) = m.topLeftCorner(used_rows, used_cols);
+  m.swap(bigger);
+}
+
+/// Keeps the entries (keep[a], keep[b]) of the lower triangle of `m` at (a, b),
+/// keep ascending. Column by column in increasing order: a destination never
+/// comes after its source, so every entry is read before it is overwritten.
+void compact_lower(Eigen::MatrixXd& m, const std::vector<int>& keep) {
+  const auto kept = static_cast<int>(keep.size());
+  for (int b = 0; b < kept; ++b) {
+    for (int a = b; a < kept; ++a) m(a, b) = m(keep[a], keep[b]);
+  }
+}
+
+}  // namespace
+
+CekfFilter::CekfFilter(int max_active, int keep_steps) : max_active_(max_active), keep_steps_(keep_steps) {
+  if (max_active < 1) {
+    throw std::invalid_argument("cekf: max_active must be at least 1, got " + std::to_string(max_active));
+  }
+  if (keep_steps < 0) {
+    throw std::invalid_argument("cekf: keep_steps must be at least 0, got " + std::to_string(keep_steps));
+  }
+}
+
+void CekfFilter::reset(const Eigen::MatrixXd& P_rr) {
+  support::validate_reset(P_rr, "cekf reset");
+  k_ = static_cast<int>(P_rr.rows());
+  n_ = na_ = ns_ = k_;
+  n0_ = 0;  // nothing passive yet
+  slot_.resize(static_cast<std::size_t>(k_));
+  std::iota(slot_.begin(), slot_.end(), 0);
+  active_ = slot_;
+  touched_.assign(static_cast<std::size_t>(k_), 0);
+  slot_live_.assign(static_cast<std::size_t>(k_), 1);
+  dead_slots_ = 0;
+  updates_ = 0;
+  global_updates_ = 0;
+  memo_.clear();
+
+  const Index cap = std::max<Index>(k_, kInitialCapacity);
+  paa_ = Eigen::MatrixXd::Zero(cap, cap);
+  phi_ = Eigen::MatrixXd::Zero(cap, kInitialCapacity);
+  psi_ = Eigen::MatrixXd::Zero(kInitialCapacity, kInitialCapacity);
+  gt_ = Eigen::MatrixXd::Zero(cap, kInitialCapacity);
+  p0_ = Eigen::MatrixXd::Zero(cap, cap);
+  paa_.topLeftCorner(k_, k_).triangularView<Eigen::Lower>() = P_rr;
+}
+
+void CekfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {
+  support::validate_prediction(J_rr, Q, k_, "cekf predict");
+
+  // eq. 26: C_rr ← J_rr C_rr J_rrᵀ + Q.
+  const Eigen::MatrixXd C_rr = paa_.topLeftCorner(k_, k_).selfadjointView<Eigen::Lower>();
+  paa_.topLeftCorner(k_, k_).triangularView<Eigen::Lower>() = J_rr * C_rr * J_rr.transpose() + Q;
+
+  // eq. 27 inside A: the lower triangle holds C_{A∖r, r}, which becomes C_{A∖r, r} J_rrᵀ.
+  auto C_ar = paa_.block(k_, 0, na_ - k_, k_);
+  C_ar = C_ar * J_rr.transpose();
+
+  // eq. 27 against B: C_rB = Φ_r G becomes J_rr Φ_r G, so Φ_r ← J_rr Φ_r.
+  auto phi_r = phi_.topLeftCorner(k_, n0_);
+  phi_r = J_rr * phi_r;
+}
+
+// All observations of the step as one measurement η ≈ H δx[I] (eqs. 28–32),
+// I ⊂ A after activation. With S = H P_AA Hᵀ + C_η = L Lᵀ,
+//   W = P_AA Hᵀ L⁻ᵀ (n_A × m),   V = (H Φ)ᵀ L⁻ᵀ (n0 × m),   w = L⁻¹ η:
+//   K_A = W L⁻¹ and K_B = P_BA Hᵀ S⁻¹ = Gᵀ Φᵀ Hᵀ S⁻¹ = Gᵀ V L⁻¹, so (eq. 31)
+//     δx_A = −W w,   δx_B = −Gᵀ (V w)
+//   and (eq. 32, δP = −K S Kᵀ)
+//     P_AA ← P_AA − W Wᵀ
+//     P_AB ← P_AB − K_A H P_AB = (Φ − W Vᵀ) G             ⇒ Φ ← Φ − W Vᵀ
+//     P_BB ← P_BB − Gᵀ Φᵀ Hᵀ S⁻¹ H Φ G = P⁰_BB − Gᵀ (Ψ + V Vᵀ) G  ⇒ Ψ ← Ψ + V Vᵀ.
+Eigen::VectorXd CekfFilter::update(const std::vector<LinearizedObservation>& obs) {
+  const support::StackedObservation s = support::stack_observations(obs, n_, "cekf update");
+  Eigen::VectorXd dx = Eigen::VectorXd::Zero(n_);
+  if (s.eta.size() == 0) return dx;
+
+  activate(s.union_idx);
+  const std::vector<int> pos = positions(s.union_idx);
+  Eigen::MatrixXd W = active_columns(pos) * s.J.transpose();  // P_AA Hᵀ
+
+  // eq. 29: S = H P_II Hᵀ + C_η.
+  const Eigen::MatrixXd S = s.J * W(pos, Eigen::all) + s.C_eta;
+  const Eigen::LLT<Eigen::MatrixXd> llt(S);
+  if (llt.info() != Eigen::Success) {
+    throw std::runtime_error("cekf update: S (" + support::size_text(S.rows(), S.cols()) +
+                             ") is not positive definite");
+  }
+  Eigen::MatrixXd V = (s.J * phi_(pos, Eigen::seqN(0, n0_))).transpose();
+  llt.matrixU().solveInPlace<Eigen::OnTheRight>(W);
+  llt.matrixU().solveInPlace<Eigen::OnTheRight>(V);
+  const Eigen::VectorXd whitened = llt.matrixL().solve(s.eta);
+
+  // eq. 31 (before Φ changes: δx_B uses the Φ of the prior).
+  const Eigen::VectorXd dx_active = -W * whitened;
+  const Eigen::VectorXd basis_step = V * whitened;
+  const Eigen::VectorXd dx_slots = -gt_.topLeftCorner(ns_, n0_) * basis_step;
+  for (int i = 0; i < n_; ++i) {
+    const auto u = static_cast<std::size_t>(i);
+    dx[i] = active_[u] >= 0 ? dx_active[active_[u]] : dx_slots[slot_[u]];
+  }
+
+  // eq. 32 on the compressed representation.
+  paa_.topLeftCorner(na_, na_).selfadjointView<Eigen::Lower>().rankUpdate(W, -1.0);
+  phi_.topLeftCorner(na_, n0_).noalias() -= W * V.transpose();
+  psi_.topLeftCorner(n0_, n0_).selfadjointView<Eigen::Lower>().rankUpdate(V, 1.0);
+  mirror_psi();
+  refresh_memo(V);
+
+  ++updates_;
+  touch(s.union_idx);
+  flush_if_needed();
+  return dx;
+}
+
+// δx_new = J δx[idx] + w with idx ⊂ A after activation:
+//   C_new,A = J P_idx,A,  C_new,new = J P_idx,idx Jᵀ + C_new,
+//   C_new,B = J P_idx,B = (J Φ_idx) G  ⇒ the new rows of Φ are J Φ_idx.
+int CekfFilter::augment(const StateAugmentation& aug) {
+  support::validate_augmentation(aug, n_, "cekf augment");
+  const auto added = static_cast<int>(aug.C_new.rows());
+  const int first = n_;
+  if (added == 0) return first;
+
+  activate(aug.idx);
+  const std::vector<int> pos = positions(aug.idx);
+  const Eigen::MatrixXd C_new_A = aug.J * active_columns(pos).transpose();
+  const Eigen::MatrixXd C_new_new = C_new_A(Eigen::all, pos) * aug.J.transpose() + aug.C_new;
+  const Eigen::MatrixXd phi_new = aug.J * phi_(pos, Eigen::seqN(0, n0_));
+
+  reserve_active(na_ + added);
+  reserve_slots(ns_ + added);
+  paa_.block(na_, 0, added, na_) = C_new_A;
+  paa_.block(na_, na_, added, added).triangularView<Eigen::Lower>() = C_new_new;
+  phi_.block(na_, 0, added, n0_) = phi_new;
+  for (int r = 0; r < added; ++r) {
+    slot_.push_back(ns_ + r);
+    active_.push_back(na_ + r);
+    touched_.push_back(updates_);
+    slot_live_.push_back(1);
+  }
+  n_ += added;
+  na_ += added;
+  ns_ += added;
+  touch(aug.idx);
+  flush_if_needed();
+  return first;
+}
+
+Eigen::MatrixXd CekfFilter::marginal(const std::vector<int>& idx) const { return cross(idx, idx); }
+
+Eigen::MatrixXd CekfFilter::cross(const std::vector<int>& rows, const std::vector<int>& cols) const {
+  support::require_indices(rows, n_, "cekf cross: rows", false);
+  if (&rows != &cols) support::require_indices(cols, n_, "cekf cross: cols", false);
+  const auto is_active = [this](int i) { return active_[static_cast<std::size_t>(i)] >= 0; };
+  if (std::all_of(rows.begin(), rows.end(), is_active) && std::all_of(cols.begin(), cols.end(), is_active)) {
+    return active_block(rows, cols);  // the common case
+  }
+  return mixed_block(rows, cols, &rows == &cols);
+}
+
+Eigen::MatrixXd CekfFilter::active_block(const std::vector<int>& rows, const std::vector<int>& cols) const {
+  Eigen::MatrixXd out(static_cast<Index>(rows.size()), static_cast<Index>(cols.size()));
+  for (std::size_t j = 0; j < cols.size(); ++j) {
+    const int b = active_[static_cast<std::size_t>(cols[j])];
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      out(static_cast<Index>(i), static_cast<Index>(j)) = paa(active_[static_cast<std::size_t>(rows[i])], b);
+  }
+  return out;
+}
+
+// Entries from (I): A×A from P_AA; with the basis coordinates Φ_a of an active
+// row a and G_j of a passive row j, P_aj = Φ_a G_j and P_ij = P⁰_ij − G_iᵀ Ψ G_j.
+Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std::vector<int>& cols,
+                                        bool symmetric) const {
+  Eigen::MatrixXd out(static_cast<Index>(rows.size()), static_cast<Index>(cols.size()));
+  const Split r = split(rows), c = split(cols);
+  const auto basis = Eigen::seqN(0, n0_);
+  const Eigen::MatrixXd g_rows = gt_(r.passive_slot, basis).transpose();  // G_i, n0 × |rows in B|
+  const Eigen::MatrixXd g_cols = symmetric ? g_rows : Eigen::MatrixXd(gt_(c.passive_slot, basis).transpose());
+  // A handful of rows and columns: coefficient-wise products of copied rows
+  // beat blocked products.
+  const Eigen::MatrixXd phi_rows = phi_(r.active_pos, basis);
+  const Eigen::MatrixXd ab = phi_rows.lazyProduct(g_cols);
+  const Eigen::MatrixXd ba =
+      symmetric ? ab : Eigen::MatrixXd(Eigen::MatrixXd(phi_(c.active_pos, basis)).lazyProduct(g_rows));
+  const Eigen::MatrixXd bb =
+      symmetric ? passive_quadratic(r.passive_slot, g_rows) : Eigen::MatrixXd(g_rows.transpose() * psi_times(g_cols));
+  for (std::size_t i = 0; i < r.active_at.size(); ++i) {
+    for (std::size_t j = 0; j < c.active_at.size(); ++j)
+      out(r.active_at[i], c.active_at[j]) = paa(r.active_pos[i], c.active_pos[j]);
+    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
+      out(r.active_at[i], c.passive_at[j]) = ab(static_cast<Index>(i), static_cast<Index>(j));
+  }
+  for (std::size_t i = 0; i < r.passive_at.size(); ++i) {
+    for (std::size_t j = 0; j < c.active_at.size(); ++j)
+      out(r.passive_at[i], c.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
+    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
+      out(r.passive_at[i], c.passive_at[j]) =
+          p0(r.passive_slot[i], c.passive_slot[j]) - bb(static_cast<Index>(i), static_cast<Index>(j));
+  }
+  return out;
+}
+
+// Dropping rows keeps (I) on the rest: an active row takes its rows of P_AA
+// and Φ along, a passive one its column of G and its row and column of P⁰
+// (its slot, left unused until the next global update). The basis stays.
+void CekfFilter::remove(std::vector<int> idx) {
+  support::validate_removal(idx, n_, k_, "cekf remove");
+  std::vector<char> gone(static_cast<std::size_t>(n_), 0);
+  std::vector<char> position_gone(static_cast<std::size_t>(na_), 0);
+  for (int i : idx) {
+    const auto u = static_cast<std::size_t>(i);
+    gone[u] = 1;
+    if (active_[u] >= 0) position_gone[static_cast<std::size_t>(active_[u])] = 1;
+    slot_live_[static_cast<std::size_t>(slot_[u])] = 0;
+    ++dead_slots_;
+  }
+  std::vector<int> keep, new_position(static_cast<std::size_t>(na_), -1);
+  for (int a = 0; a < na_; ++a) {
+    if (position_gone[static_cast<std::size_t>(a)]) continue;
+    new_position[static_cast<std::size_t>(a)] = static_cast<int>(keep.size());
+    keep.push_back(a);
+  }
+  compact_active(keep);
+  memo_.clear();
+
+  std::size_t w = 0;
+  for (std::size_t i = 0; i < gone.size(); ++i) {
+    if (gone[i]) continue;
+    slot_[w] = slot_[i];
+    active_[w] = active_[i] >= 0 ? new_position[static_cast<std::size_t>(active_[i])] : -1;
+    touched_[w] = touched_[i];
+    ++w;
+  }
+  slot_.resize(w);
+  active_.resize(w);
+  touched_.resize(w);
+  n_ = static_cast<int>(w);
+}
+
+// The global update: (I) written out, then a new partition with Φ = I, Ψ = 0.
+void CekfFilter::flush() {
+  memo_.clear();  // Ψ becomes 0
+  if (n0_ > 0) refresh_passive_block();
+  write_active_rows_into_store();
+  if (dead_slots_ > 0) drop_dead_slots();
+  repartition(choose_active());
+  ++global_updates_;
+}
+
+Eigen::MatrixXd CekfFilter::covariance() const {
+  std::vector<int> all(static_cast<std::size_t>(n_));
+  std::iota(all.begin(), all.end(), 0);
+  return marginal(all);
+}
+
+// ---------------------------------------------------------------- activation
+
+// Rows J ⊂ B move to A, exactly: with g = G_{:,J},
+//   P_JA = (Φ g)ᵀ,   P_JJ = P⁰_JJ − gᵀ Ψ g                                 from (I),
+// and the basis grows by the rows P⁰_{J,B'} (B' = B ∖ J):
+//   G' = [G_{:,B'}; P⁰_{J,B'}],   Ψ' = diag(Ψ, 0),   Φ' = [[Φ, 0], [−gᵀΨ, I]].
+// Check of (I) for the new partition:
+//   P_{A,B'}  = Φ G_{:,B'}                    = [Φ, 0] G'             (unchanged rows)
+//   P_{J,B'}  = P⁰_{J,B'} − gᵀ Ψ G_{:,B'}      = [−gᵀΨ, I] G'          (from (I) for P_BB)
+//   P_{B'B'}  = P⁰_{B'B'} − G_{:,B'}ᵀ Ψ G_{:,B'} = P⁰_{B'B'} − G'ᵀ Ψ' G'  (the zero block of Ψ'
+//                                                                   hides the new rows of G').
+void CekfFilter::activate(const std::vector<int>& rows) {
+  std::vector<int> passive;
+  for (int i : rows) {
+    if (active_[static_cast<std::size_t>(i)] < 0) passive.push_back(i);
+  }
+  std::sort(passive.begin(), passive.end());
+  passive.erase(std::unique(passive.begin(), passive.end()), passive.end());
+  if (passive.empty()) return;
+  const auto t = static_cast<int>(passive.size());
+  std::vector<int> slots;
+  for (int i : passive) slots.push_back(slot_[static_cast<std::size_t>(i)]);
+
+  const Eigen::MatrixXd g = gt_(slots, Eigen::seqN(0, n0_)).transpose();
+  const Eigen::MatrixXd psi_g = psi_times(g);
+  const Eigen::MatrixXd P_JA = (phi_.topLeftCorner(na_, n0_) * g).transpose();
+  Eigen::MatrixXd P_JJ = -g.transpose() * psi_g;
+  for (int b = 0; b < t; ++b) {
+    for (int a = b; a < t; ++a)
+      P_JJ(a, b) += p0(slots[static_cast<std::size_t>(a)], slots[static_cast<std::size_t>(b)]);
+  }
+
+  reserve_active(na_ + t);
+  reserve_basis(n0_ + t);
+  paa_.block(na_, 0, t, na_) = P_JA;
+  paa_.block(na_, na_, t, t).triangularView<Eigen::Lower>() = P_JJ;
+  phi_.block(0, n0_, na_, t).setZero();
+  phi_.block(na_, 0, t, n0_) = -psi_g.transpose();
+  phi_.block(na_, n0_, t, t).setIdentity();
+  psi_.block(n0_, 0, t, n0_ + t).setZero();
+  psi_.block(0, n0_, n0_, t).setZero();
+  for (int c = 0; c < t; ++c) p0_column(slots[static_cast<std::size_t>(c)], gt_.col(n0_ + c).head(ns_));
+  for (int c = 0; c < t; ++c) active_[static_cast<std::size_t>(passive[static_cast<std::size_t>(c)])] = na_ + c;
+  na_ += t;
+  n0_ += t;
+}
+
+// ---------------------------------------------------------------- memo
+
+Eigen::MatrixXd CekfFilter::passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const {
+  auto [entry, added] = memo_.try_emplace(slots);
+  if (added) entry->second.quadratic = g.transpose() * psi_times(g);
+  entry->second.asked = true;
+  return entry->second.quadratic;
+}
+
+// Ψ ← Ψ + V Vᵀ adds (Vᵀ G_J)ᵀ (Vᵀ G_J) to G_Jᵀ Ψ G_J: O(m n0) per column
+// instead of O(n0²) afresh. (Activation pads Ψ and G with blocks that cancel,
+// so it leaves G_Jᵀ Ψ G_J as it is.) Blocks not asked about since the last
+// update are dropped.
+void CekfFilter::refresh_memo(const Eigen::MatrixXd& V) {
+  std::erase_if(memo_, [](const auto& entry) { return !entry.second.asked; });
+  std::vector<int> all_slots;
+  for (const auto& [slots, entry] : memo_) all_slots.insert(all_slots.end(), slots.begin(), slots.end());
+  const Eigen::MatrixXd VtG = V.transpose() * gt_(all_slots, Eigen::seqN(0, n0_)).transpose();
+  Index column = 0;
+  for (auto& [slots, entry] : memo_) {
+    const auto size = static_cast<Index>(slots.size());
+    const auto block = VtG.middleCols(column, size);
+    entry.quadratic.noalias() += block.transpose() * block;
+    entry.asked = false;
+    column += size;
+  }
+}
+
+void CekfFilter::touch(const std::vector<int>& rows) {
+  for (int i : rows) touched_[static_cast<std::size_t>(i)] = updates_;
+}
+
+void CekfFilter::flush_if_needed() {
+  if (n0_ > max_active_ || na_ > max_active_) flush();
+}
+
+// ---------------------------------------------------------------- global update
+
+// P⁰_BB ← P⁰_BB − Gᵀ Ψ G, the lower triangle only (one triangular product).
+// Entries of active or dead slots come out meaningless; the next steps
+// overwrite or drop them.
+void CekfFilter::refresh_passive_block() {
+  const auto gt = gt_.topLeftCorner(ns_, n0_);
+  const Eigen::MatrixXd psi_g = psi_.topLeftCorner(n0_, n0_) * gt.transpose();
+  p0_.topLeftCorner(ns_, ns_).triangularView<Eigen::Lower>() -= gt * psi_g;
+}
+
+// The rows of A into the store: P_AB = Φ G against every slot, then P_AA.
+void CekfFilter::write_active_rows_into_store() {
+  std::vector<int> slot_of(static_cast<std::size_t>(na_));
+  for (int i = 0; i < n_; ++i) {
+    const auto u = static_cast<std::size_t>(i);
+    if (active_[u] >= 0) slot_of[static_cast<std::size_t>(active_[u])] = slot_[u];
+  }
+  const Eigen::MatrixXd pab = phi_.topLeftCorner(na_, n0_) * gt_.topLeftCorner(ns_, n0_).transpose();
+  for (int a = 0; a < na_; ++a) {
+    const int s = slot_of[static_cast<std::size_t>(a)];
+    p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
+    p0_.row(s).head(s) = pab.row(a).head(s);
+  }
+  for (int b = 0; b < na_; ++b) {
+    for (int a = b; a < na_; ++a) {
+      const int s = slot_of[static_cast<std::size_t>(a)], t = slot_of[static_cast<std::size_t>(b)];
+      p0_(std::max(s, t), std::min(s, t)) = paa_(a, b);
+    }
+  }
+}
+
+// Slots of removed rows leave the store (it holds the full covariance now).
+void CekfFilter::drop_dead_slots() {
+  std::vector<int> keep, new_slot(static_cast<std::size_t>(ns_), -1);
+  for (int s = 0; s < ns_; ++s) {
+    if (!slot_live_[static_cast<std::size_t>(s)]) continue;
+    new_slot[static_cast<std::size_t>(s)] = static_cast<int>(keep.size());
+    keep.push_back(s);
+  }
+  compact_lower(p0_, keep);
+  for (int& s : slot_) s = new_slot[static_cast<std::size_t>(s)];
+  ns_ = static_cast<int>(keep.size());
+  slot_live_.assign(static_cast<std::size_t>(ns_), 1);
+  dead_slots_ = 0;
+}
+
+// The robot and the rows touched within the last keep_steps updates, at most
+// max_active/2 rows in all (the most recently touched win), ascending.
+std::vector<int> CekfFilter::choose_active() const {
+  std::vector<int> recent;
+  for (int i = k_; i < n_; ++i) {
+    if (touched_[static_cast<std::size_t>(i)] > updates_ - keep_steps_) recent.push_back(i);
+  }
+  const auto room = static_cast<std::size_t>(std::max(0, max_active_ / 2 - k_));
+  if (recent.size() > room) {
+    std::stable_sort(recent.begin(), recent.end(), [this](int a, int b) {
+      return touched_[static_cast<std::size_t>(a)] > touched_[static_cast<std::size_t>(b)];
+    });
+    recent.resize(room);
+    std::sort(recent.begin(), recent.end());
+  }
+  std::vector<int> chosen(static_cast<std::size_t>(k_));
+  std::iota(chosen.begin(), chosen.end(), 0);
+  chosen.insert(chosen.end(), recent.begin(), recent.end());
+  return chosen;
+}
+
+// With the store holding the full covariance P⁰: A = active_rows, B = the
+// rest, P_AA = P⁰_AA, G = P⁰_{A,B} (so a0 = A), Φ = I, Ψ = 0, and (I) holds.
+void CekfFilter::repartition(const std::vector<int>& active_rows) {
+  const auto na = static_cast<int>(active_rows.size());
+  na_ = 0;  // nothing of the old Φ, Ψ, G, P_AA is kept
+  n0_ = 0;
+  reserve_active(na);
+  reserve_basis(na);
+  std::fill(active_.begin(), active_.end(), -1);
+  std::vector<int> slots;
+  for (int c = 0; c < na; ++c) {
+    const auto i = static_cast<std::size_t>(active_rows[static_cast<std::size_t>(c)]);
+    active_[i] = c;
+    slots.push_back(slot_[i]);
+  }
+  for (int b = 0; b < na; ++b) {
+    for (int a = b; a < na; ++a)
+      paa_(a, b) = p0(slots[static_cast<std::size_t>(a)], slots[static_cast<std::size_t>(b)]);
+    p0_column(slots[static_cast<std::size_t>(b)], gt_.col(b).head(ns_));
+  }
+  phi_.topLeftCorner(na, na).setIdentity();
+  psi_.topLeftCorner(na, na).setZero();
+  na_ = n0_ = na;
+}
+
+// ---------------------------------------------------------------- storage
+
+void CekfFilter::compact_active(const std::vector<int>& keep) {
+  compact_lower(paa_, keep);
+  for (std::size_t a = 0; a < keep.size(); ++a) {
+    phi_.row(static_cast<Index>(a)).head(n0_) = phi_.row(keep[a]).head(n0_);
+  }
+  na_ = static_cast<int>(keep.size());
+}
+
+Eigen::MatrixXd CekfFilter::active_columns(const std::vector<int>& pos) const {
+  // Column a of P_AA is row a of the lower triangle left of the diagonal, then
+  // column a of the lower triangle from the diagonal down.
+  Eigen::MatrixXd out(na_, static_cast<Index>(pos.size()));
+  for (std::size_t c = 0; c < pos.size(); ++c) {
+    const int a = pos[c];
+    auto column = out.col(static_cast<Index>(c));
+    column.head(a) = paa_.row(a).head(a).transpose();
+    column.tail(na_ - a) = paa_.col(a).segment(a, na_ - a);
+  }
+  return out;
+}
+
+void CekfFilter::p0_column(int s, Eigen::Ref<Eigen::VectorXd> out) const {
+  out.head(s) = p0_.row(s).head(s).transpose();
+  out.tail(ns_ - s) = p0_.col(s).segment(s, ns_ - s);
+}
+
+CekfFilter::Split CekfFilter::split(const std::vector<int>& idx) const {
+  Split p;
+  for (std::size_t c = 0; c < idx.size(); ++c) {
+    const auto i = static_cast<std::size_t>(idx[c]);
+    if (active_[i] >= 0) {
+      p.active_at.push_back(static_cast<Index>(c));
+      p.active_pos.push_back(active_[i]);
+    } else {
+      p.passive_at.push_back(static_cast<Index>(c));
+      p.passive_slot.push_back(slot_[i]);
+    }
+  }
+  return p;
+}
+
+Eigen::MatrixXd CekfFilter::psi_times(const Eigen::MatrixXd& g) const {
+  // One matrix–vector product per column: with few columns this beats a
+  // matrix product, which would first copy Ψ into its blocked layout.
+  Eigen::MatrixXd out(n0_, g.cols());
+  for (Index c = 0; c < g.cols(); ++c) out.col(c).noalias() = psi_.topLeftCorner(n0_, n0_) * g.col(c);
+  return out;
+}
+
+void CekfFilter::mirror_psi() {
+  for (int c = 0; c + 1 < n0_; ++c) {
+    psi_.row(c).segment(c + 1, n0_ - c - 1) = psi_.col(c).segment(c + 1, n0_ - c - 1).transpose();
+  }
+}
+
+std::vector<int> CekfFilter::positions(const std::vector<int>& idx) const {
+  std::vector<int> pos;
+  pos.reserve(idx.size());
+  for (int i : idx) pos.push_back(active_[static_cast<std::size_t>(i)]);
+  return pos;
+}
+
+void CekfFilter::reserve_active(int rows) {
+  grow(paa_, rows, rows, na_, na_);
+  grow(phi_, rows, phi_.cols(), na_, n0_);
+}
+
+void CekfFilter::reserve_basis(int cols) {
+  grow(phi_, phi_.rows(), cols, na_, n0_);
+  grow(psi_, cols, cols, n0_, n0_);
+  grow(gt_, gt_.rows(), cols, ns_, n0_);
+}
+
+void CekfFilter::reserve_slots(int slots) {
+  grow(p0_, slots, slots, ns_, ns_);
+  grow(gt_, slots, gt_.cols(), ns_, n0_);
+}
+
+}  // namespace mspace::cekf

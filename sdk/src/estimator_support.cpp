@@ -1,0 +1,130 @@
+// estimator_support.cpp — input checks and observation stacking of the estimators.
+#include "mspace/estimator_support.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace mspace::estimator_support {
+
+using Eigen::Index;
+
+std::string size_text(Index rows, Index cols) { return std::to_string(rows) + " x " + std::to_string(cols); }
+
+void require_finite(const Eigen::Ref<const Eigen::MatrixXd>& m, const std::string& context, const char* name) {
+  for (Index r = 0; r < m.rows(); ++r) {
+    if (!m.row(r).allFinite()) {
+      throw std::invalid_argument(context + ": " + name + " row " + std::to_string(r) + " is not finite");
+    }
+  }
+}
+
+void require_size(const Eigen::MatrixXd& m, Index rows, Index cols, const std::string& context, const char* name) {
+  if (m.rows() != rows || m.cols() != cols) {
+    throw std::invalid_argument(context + ": " + name + " is " + size_text(m.rows(), m.cols()) + ", expected " +
+                                size_text(rows, cols));
+  }
+}
+
+void require_indices(const std::vector<int>& idx, int n, const std::string& context, bool distinct) {
+  for (int i : idx) {
+    if (i < 0 || i >= n) {
+      throw std::invalid_argument(context + ": index " + std::to_string(i) + " is out of range [0, " +
+                                  std::to_string(n) + ")");
+    }
+  }
+  if (!distinct) return;
+  std::vector<int> sorted = idx;
+  std::sort(sorted.begin(), sorted.end());
+  const auto twice = std::adjacent_find(sorted.begin(), sorted.end());
+  if (twice != sorted.end()) {
+    throw std::invalid_argument(context + ": index " + std::to_string(*twice) + " appears more than once");
+  }
+}
+
+void validate_reset(const Eigen::MatrixXd& P_rr, const std::string& context) {
+  require_size(P_rr, P_rr.rows(), P_rr.rows(), context, "P_rr");
+  require_finite(P_rr, context, "P_rr");
+}
+
+void validate_observation(const LinearizedObservation& o, int n, const std::string& context) {
+  const Index m = o.J.rows();
+  if (o.J.cols() != static_cast<Index>(o.idx.size())) {
+    throw std::invalid_argument(context + ": J has " + std::to_string(o.J.cols()) + " columns but idx has " +
+                                std::to_string(o.idx.size()) + " indices");
+  }
+  if (o.eta.size() != m) {
+    throw std::invalid_argument(context + ": eta has " + std::to_string(o.eta.size()) + " rows but J has " +
+                                std::to_string(m));
+  }
+  require_size(o.C_eta, m, m, context, "C_eta");
+  require_indices(o.idx, n, context, true);
+  require_finite(o.eta, context, "eta");
+  require_finite(o.J, context, "J");
+  require_finite(o.C_eta, context, "C_eta");
+}
+
+void validate_augmentation(const StateAugmentation& aug, int n, const std::string& context) {
+  const Index added = aug.C_new.rows();
+  require_size(aug.C_new, added, added, context, "C_new");
+  require_size(aug.J, added, static_cast<Index>(aug.idx.size()), context, "J");
+  require_indices(aug.idx, n, context, false);
+  require_finite(aug.J, context, "J");
+  require_finite(aug.C_new, context, "C_new");
+}
+
+void validate_prediction(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q, int k, const std::string& context) {
+  require_size(J_rr, k, k, context, "J_rr");
+  require_size(Q, k, k, context, "Q");
+  require_finite(J_rr, context, "J_rr");
+  require_finite(Q, context, "Q");
+}
+
+void validate_removal(const std::vector<int>& idx, int n, int k, const std::string& context) {
+  require_indices(idx, n, context, true);
+  for (int i : idx) {
+    if (i < k) {
+      throw std::invalid_argument(context + ": index " + std::to_string(i) +
+                                  " is a robot pose coordinate (robot dimension " + std::to_string(k) + ")");
+    }
+  }
+}
+
+namespace {
+
+std::vector<int> union_of_indices(const std::vector<LinearizedObservation>& obs) {
+  std::vector<int> all;
+  for (const auto& o : obs) all.insert(all.end(), o.idx.begin(), o.idx.end());
+  std::sort(all.begin(), all.end());
+  all.erase(std::unique(all.begin(), all.end()), all.end());
+  return all;
+}
+
+}  // namespace
+
+StackedObservation stack_observations(const std::vector<LinearizedObservation>& obs, int n,
+                                      const std::string& context) {
+  Index m = 0;
+  for (std::size_t i = 0; i < obs.size(); ++i) {
+    validate_observation(obs[i], n, context + ": observation " + std::to_string(i));
+    m += obs[i].eta.size();
+  }
+  StackedObservation s;
+  s.union_idx = union_of_indices(obs);
+  s.eta.resize(m);
+  s.J = Eigen::MatrixXd::Zero(m, static_cast<Index>(s.union_idx.size()));
+  s.C_eta = Eigen::MatrixXd::Zero(m, m);
+  Index row = 0;
+  for (const auto& o : obs) {
+    const Index rows = o.eta.size();
+    s.eta.segment(row, rows) = o.eta;
+    s.C_eta.block(row, row, rows, rows) = o.C_eta;
+    for (std::size_t c = 0; c < o.idx.size(); ++c) {
+      const auto pos = std::lower_bound(s.union_idx.begin(), s.union_idx.end(), o.idx[c]) - s.union_idx.begin();
+      s.J.block(row, pos, rows, 1) = o.J.col(static_cast<Index>(c));
+    }
+    row += rows;
+  }
+  return s;
+}
+
+}  // namespace mspace::estimator_support
