@@ -374,10 +374,16 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
       C_eta.noalias() = in.J_eta_v * meas[mi].C_v * in.J_eta_v.transpose();
       S.noalias() = in.J_eta_o * M * in.J_eta_o.transpose();  // eq. 29
       S += C_eta;
+      const int mi_dim = static_cast<int>(m);
+      // Most pairs are far apart: d² = ηᵀS⁻¹η ≥ |η|²/λ_max(S) ≥ |η|²/trace(S),
+      // so when that bound is beyond both thresholds the pair can neither be
+      // gated in nor make the measurement ambiguous — no factorisation needed.
+      const double far = std::max(threshold(gate_chi2_, ac.gate_probability, mi_dim),
+                                  threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
+      if (!log_->enabled(LogLevel::Trace) && S.trace() > 0.0 && in.eta.squaredNorm() > far * S.trace()) continue;
       scratch_ldlt_.compute(S);
       if (scratch_ldlt_.info() != Eigen::Success || !(scratch_ldlt_.vectorD().array() > 0.0).all()) continue;
       const double d2 = in.eta.dot(scratch_ldlt_.solve(in.eta));
-      const int mi_dim = static_cast<int>(m);
       closest[mi] = std::min(closest[mi], d2 / threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
       if (log_->enabled(LogLevel::Trace))
         log_->trace("step ", step_, ": measurement ", mi, " vs #", mf.id, " (dim ", dim, "): d2 ", d2, " eta ",
