@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <numeric>
 #include <sstream>
 #include <unordered_map>
@@ -133,6 +134,7 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry) : config_(config) 
 
   for (std::size_t i = 0; i < sensors_.size(); ++i)
     if (sensors_[i].config.name == config_.evaluation.ground_truth_sensor) ground_truth_sensor_ = static_cast<int>(i);
+  check_recorded_mounts();
 
   dofs_ = guarded(config_.motion.instance, *motion_lib_, "estimated_dofs",
                   [&] { return motion_->estimated_dofs(); });
@@ -250,6 +252,34 @@ void Slam::predict(const DataStep& data) {
   x_r_ = pred.pose;
   const Eigen::MatrixXd Q = pred.J_rd * pred.C_d * pred.J_rd.transpose();  // eq. 26
   guarded(config_.estimator.instance, *estimator_lib_, "predict", [&] { estimator_->predict(pred.J_rr, Q); });
+}
+
+// A sensor whose mount the data records (a camera calibration file) must be
+// configured with that mount: the configuration repeats it (the SDK keeps
+// sensors and data sources apart), and a copy that disagrees would silently
+// bend every measurement.
+void Slam::check_recorded_mounts() const {
+  const std::vector<RecordedMount> recorded =
+      guarded(config_.source.instance, *source_lib_, "recorded_mounts", [&] { return source_->recorded_mounts(); });
+  auto text = [](const Pose6& m) {
+    std::ostringstream s;
+    const double deg = 180.0 / std::numbers::pi;
+    s << "[" << m[kX] << ", " << m[kY] << ", " << m[kZ] << ", " << m[kTheta] * deg << ", " << m[kPhi] * deg << ", "
+      << m[kPsi] * deg << "]";
+    return s.str();
+  };
+  for (const RecordedMount& r : recorded) {
+    for (const SensorSlot& sensor : sensors_) {
+      if (sensor.config.channel != r.channel) continue;
+      const Pose6 d = sensor.config.mount - r.mount;
+      bool same = d.head<3>().cwiseAbs().maxCoeff() <= 1e-6;
+      for (int a = kTheta; a <= kPsi; ++a) same = same && std::abs(wrap_angle(d[a])) <= 1e-6;
+      if (!same)
+        throw ConfigError(config_.file.string() + ": sensors." + sensor.config.name + ".mount " +
+                          text(sensor.config.mount) + " (x y z m, theta phi psi deg) differs from the mount " +
+                          text(r.mount) + " that " + r.origin + " records for channel '" + r.channel + "'");
+    }
+  }
 }
 
 SensorView Slam::sensor_view(int sensor_index, double t) const {

@@ -143,6 +143,7 @@ class Slam {
   struct ReadingWork;
 
   void predict(const DataStep& data);
+  void check_recorded_mounts() const;
   void process_reading(const SensorReading& reading, std::vector<ReadingWork>& work);
   void process_sensor_reading(const SensorReading& reading, int sensor_index, std::vector<ReadingWork>& work);
   void associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,

@@ -313,7 +313,7 @@ std::vector<ParamSpec> ImageSequence::param_specs() {
 
 ImageSequence::ImageSequence(const std::string& folder, const std::string& channel, Logger& log,
                              const std::string& laser_channel)
-    : channel_(channel), laser_channel_(laser_channel) {
+    : folder_(folder), channel_(channel), laser_channel_(laser_channel) {
   const fs::path dir(folder);
   if (!fs::is_directory(dir)) throw std::runtime_error(folder + ": not a folder");
   camera_ = read_camera_yaml((dir / "camera.yaml").string());
@@ -352,6 +352,12 @@ ImageSequence::ImageSequence(const PluginArgs& args)
 Pose6 ImageSequence::initial_pose() const {
   const Eigen::Vector3d p = interpolate(odometry_, frames_.front().t);
   return make_pose2d(p[0], p[1], p[2]);
+}
+
+std::vector<RecordedMount> ImageSequence::recorded_mounts() const {
+  std::vector<RecordedMount> mounts{{channel_, camera_.mount, (fs::path(folder_) / "camera.yaml").string()}};
+  if (!laser_.t.empty()) mounts.push_back({laser_channel_, laser_.mount, (fs::path(folder_) / "laser.yaml").string()});
+  return mounts;
 }
 
 bool ImageSequence::next(DataStep& step) {

@@ -40,8 +40,9 @@
 // unreadable images (checked when the source is built), a camera.yaml without
 // a required key.
 //
-// The camera's mount is not passed to the kernel (the SDK has no channel for
-// it): the run configuration's sensors.<name>.mount must repeat camera.yaml's.
+// The mounts of camera.yaml and laser.yaml are reported as recorded_mounts():
+// the run configuration's sensors.<name>.mount must repeat them, and the
+// kernel refuses a run where it does not.
 #pragma once
 
 #include <Eigen/Core>
@@ -111,6 +112,8 @@ class ImageSequence final : public DataSource {
   bool next(DataStep& step) override;
   std::size_t size_hint() const override { return frames_.size(); }
   Pose6 initial_pose() const override;
+  /// The camera's mount (camera.yaml) on `channel`, the laser's (laser.yaml) on `laser_channel`.
+  std::vector<RecordedMount> recorded_mounts() const override;
 
   const camera::CameraModel& camera() const { return camera_; }
   const std::vector<Frame>& frames() const { return frames_; }
@@ -121,6 +124,7 @@ class ImageSequence final : public DataSource {
   /// Appends the not yet delivered scans stamped at or before t.
   void add_scans_until(double t, DataStep& step);
 
+  std::string folder_;
   std::string channel_;
   camera::CameraModel camera_;
   Eigen::RowVectorXd camera_row_;

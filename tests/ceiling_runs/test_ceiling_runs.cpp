@@ -178,6 +178,25 @@ TEST_F(CeilingRuns, OdometryAloneDrifts) {
   EXPECT_GT(odometry_.return_position, 0.5);
 }
 
+// camera.yaml records the camera's mount; a run configured with another one
+// is refused with both mounts in the message, before any step.
+TEST_F(CeilingRuns, AMountThatDisagreesWithCameraYamlIsRefused) {
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunConfig config = load_config(fs::path(MSPACE_SOURCE_DIR) / "config" / "ceiling_lamps.yaml", registry);
+  ASSERT_EQ(config.sensors.size(), 1u);
+  config.sensors[0].mount[kTheta] += 2.0 * kDeg;
+  try {
+    Slam slam(config, registry);
+    FAIL() << "the run was accepted";
+  } catch (const ConfigError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("sensors.camera.mount [0.1, 0, 0.4, 2, 0, 0]"), std::string::npos) << what;
+    EXPECT_NE(what.find((kRoute / "camera.yaml").string()), std::string::npos) << what;
+    EXPECT_NE(what.find("[0.1, 0, 0.4, 0, 0, 0]"), std::string::npos) << what;
+  }
+}
+
 TEST_F(CeilingRuns, LampsAloneCutTheReturnErrorTenfold) {
   const Outcome& lamps = run("lamps");
   print_row("lamps", lamps);

@@ -10,7 +10,9 @@
 
 #include <Eigen/Core>
 
-#define MSPACE_SDK_VERSION_MAJOR 1
+// The major version changes with every change of the plugin interfaces'
+// layout (2: DataSource::recorded_mounts).
+#define MSPACE_SDK_VERSION_MAJOR 2
 #define MSPACE_SDK_VERSION_MINOR 0
 
 #define MSPACE_ABI_STR2(x) #x

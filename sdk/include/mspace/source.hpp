@@ -31,6 +31,13 @@ struct DataStep {
   std::uint8_t ground_truth_known = kAllPoseCoords;
 };
 
+/// A sensor mount recorded with the data (e.g. in a camera calibration file).
+struct RecordedMount {
+  std::string channel;         ///< the channel of that sensor's readings
+  Pose6 mount = Pose6::Zero(); ///< x_rs (m, radians)
+  std::string origin;          ///< where it is recorded, e.g. "/data/seq/camera.yaml"
+};
+
 class DataSource : public PluginObject {
  public:
   /// Fills the next step; false at the end of the data. Malformed input
@@ -45,6 +52,10 @@ class DataSource : public PluginObject {
   virtual std::size_t skipped_records() const { return 0; }
   /// Ground-truth landmark positions if known (3 × N), for pictures only.
   virtual Eigen::MatrixXd true_landmarks() const { return {}; }
+  /// Sensor mounts the data records. The kernel refuses a run whose
+  /// sensors.<name>.mount differs from the recorded mount of its channel (a
+  /// configuration that silently disagrees with the calibration is wrong).
+  virtual std::vector<RecordedMount> recorded_mounts() const { return {}; }
 };
 
 }  // namespace mspace
