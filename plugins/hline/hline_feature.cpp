@@ -9,6 +9,8 @@
 #include <random>
 #include <stdexcept>
 
+#include <boost/math/distributions/chi_squared.hpp>
+
 #include "mspace/pose.hpp"
 #include "mspace/transform.hpp"
 
@@ -17,6 +19,8 @@ namespace {
 
 const double kSqrt2 = std::numbers::sqrt2;
 constexpr double kDegree = std::numbers::pi / 180.0;
+/// Smallest height above the camera (m) at which plane weights are taken.
+constexpr double kMinHeight = 0.1;
 
 const CoordLayout& hline_layout() {
   static const CoordLayout layout{BlockKind::Point3D, BlockKind::Point3D};
@@ -68,6 +72,11 @@ Eigen::MatrixXd endpoint_covariance(const Eigen::VectorXd& v, double sigma_perp,
   C_v.block<2, 2>(2, 2) = C;
   C_v(4, 4) = sigma_f * sigma_f;
   return C_v;
+}
+
+/// The x with P(X ≤ x) = p for X ~ χ²(dof).
+double chi2_quantile(double p, int dof) {
+  return boost::math::quantile(boost::math::chi_squared(static_cast<double>(dof)), p);
 }
 
 }  // namespace
@@ -139,6 +148,7 @@ void HLineFeature::add_dense_information(const Measurement& m, const SensorView&
   obs.ray_s = R * line->s.normalized();
   obs.ray_e = R * line->e.normalized();
   obs.view = view;
+  if (mdim_ < 3 && !consistent_with_stored(obs.plane)) return;  // a parallel neighbour's plane, most likely
   observations_.push_back(obs);
   prune(view.path_distance);
 
@@ -156,6 +166,86 @@ void HLineFeature::prune(double path_distance) {
          (path_distance - observations_.front().view.path_distance > config_.max_path_distance ||
           static_cast<int>(observations_.size()) > config_.max_observations))
     observations_.pop_front();
+}
+
+double HLineFeature::baseline(const Vec2& n) const {
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (const HLineObservation& o : observations_) {
+    lo = std::min(lo, n.dot(o.plane.o.head<2>()));
+    hi = std::max(hi, n.dot(o.plane.o.head<2>()));
+  }
+  return hi - lo;
+}
+
+InverseHeightPrior HLineFeature::height_prior() const {
+  return {1.0 / config_.initial_height, config_.inverse_height_sigma};
+}
+
+std::optional<RayEstimate> HLineFeature::estimate_from(const LineGeometry& g, const Vec3& q, const Vec3& at) const {
+  const std::vector<PlaneObservation> stored = planes();
+  const double rho = 1.0 / std::max(at.z() - q.z(), kMinHeight);
+  return estimate_ray(stored, plane_weights(stored, g.t, at), g.t, q, rho, height_prior());
+}
+
+std::optional<RayEstimate> HLineFeature::estimate_from_newest(const LineGeometry& g, Vec3& at) const {
+  const Vec3 q = observations_.back().plane.o;
+  const std::optional<RayEstimate> first = estimate_from(g, q, Vec3(anchor_.x(), anchor_.y(), g.z));
+  if (!first || !(first->x[1] > 0.0)) return std::nullopt;  // the line must be above the camera
+  at = ray_point(*first, g.t, q);
+  const std::optional<RayEstimate> e = estimate_from(g, q, at);
+  if (!e || !(e->x[1] > 0.0)) return std::nullopt;
+  at = ray_point(*e, g.t, q);
+  return e;
+}
+
+// Seen from the new plane's camera centre q, the stored planes and the prior
+// give the slope and inverse height of the ray to the line; the new plane,
+// through q, must hold that ray: a test of its angle, whatever the height.
+bool HLineFeature::consistent_with_stored(const PlaneObservation& plane) const {
+  if (observations_.empty()) return true;
+  const LineGeometry g = line_geometry(x_);
+  const Vec3 at(anchor_.x(), anchor_.y(), g.z);
+  const std::optional<RayEstimate> e = estimate_from(g, plane.o, at);
+  if (!e) return true;  // nothing to test against (e.g. horizontal planes)
+  const double rho = 1.0 / std::max(g.z - plane.o.z(), kMinHeight);
+  const double w = plane_weights({plane}, g.t, at)[0];
+  return plane_chi2(plane, w, g.t, plane.o, rho, *e) <= chi2_quantile(config_.consistency_probability, 1);
+}
+
+bool HLineFeature::residuals_agree(const LineGeometry& g) {
+  Vec3 at;
+  const std::optional<RayEstimate> e = estimate_from_newest(g, at);
+  if (!e) return false;
+  if (e->rows <= 2 || e->chi2 <= chi2_quantile(config_.consistency_probability, e->rows - 2)) return true;
+  const auto worst = std::max_element(e->deleted_chi2.begin(), e->deleted_chi2.end());
+  observations_.erase(observations_.begin() + (worst - e->deleted_chi2.begin()));
+  return false;
+}
+
+bool HLineFeature::views_agree(const LineGeometry& g) {
+  Vec3 at;
+  const std::optional<RayEstimate> e = estimate_from_newest(g, at);
+  if (!e) return false;
+  const std::vector<PlaneObservation> stored = planes();
+  const SplitTest split = split_test(stored, plane_weights(stored, g.t, at), g.t, observations_.back().plane.o,
+                                     e->x[1], height_prior());
+  if (split.chi2 <= chi2_quantile(config_.consistency_probability, 2)) return true;
+  std::vector<bool> drop(observations_.size(), false);
+  for (std::size_t i : split.smaller) drop[i] = true;
+  std::deque<HLineObservation> kept;
+  for (std::size_t i = 0; i < observations_.size(); ++i)
+    if (!drop[i]) kept.push_back(observations_[i]);
+  observations_ = std::move(kept);
+  return false;
+}
+
+// (c) σ_z ≤ max_height_sigma (z − z_camera); (d) the largest gap between the
+// viewing rays' angles ≤ max_ray_gap times their span.
+bool HLineFeature::well_conditioned(const LineGeometry& g, const Vec2& point, double z, const Mat2& cov) const {
+  const double height = z - observations_.back().plane.o.z();
+  if (!(std::sqrt(cov(1, 1)) <= config_.max_height_sigma * height)) return false;
+  const RaySpread rays = ray_spread(planes(), g.t, Vec3(point.x(), point.y(), z));
+  return rays.largest_gap <= config_.max_ray_gap * rays.span;
 }
 
 std::vector<PlaneObservation> HLineFeature::planes() const {
@@ -246,19 +336,18 @@ std::optional<Extension> HLineFeature::extend_direction() {
   return ext;
 }
 
-// 1 → 3: triangulation (eq. 21's offset and height). The least squares is
-// solved about the anchor, the ends placed on the result, and solved again
-// about their centre with weights at the solution; that second fit gives the
-// new M-space coordinates √2 (o, z) at the new anchor: C_new = 2 cov,
-// J_sensor = √2 ∂(o, z)/∂x_ms and, with δα = √2 δ1, J_own = 2 ∂(o, z)/∂α.
+// 1 → 3: triangulation (eq. 21's offset and height), once the planes are
+// one line (tests (a), (b): residuals_agree, views_agree) seen well enough
+// (tests (c), (d): well_conditioned; see hline_feature.hpp). The least
+// squares is solved about the anchor, the ends placed on the result, and
+// solved again about their centre with weights at the solution; that second
+// fit gives the new M-space coordinates √2 (o, z) at the new anchor:
+// C_new = 2 cov, J_sensor = √2 ∂(o, z)/∂x_ms and, with δα = √2 δ1,
+// J_own = 2 ∂(o, z)/∂α.
 std::optional<Extension> HLineFeature::extend_position() {
   const LineGeometry g = line_geometry(x_);
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (const HLineObservation& o : observations_) {
-    lo = std::min(lo, g.n.dot(o.plane.o.head<2>()));
-    hi = std::max(hi, g.n.dot(o.plane.o.head<2>()));
-  }
-  if (!(hi - lo >= config_.min_baseline)) return std::nullopt;
+  if (!(baseline(g.n) >= config_.min_baseline)) return std::nullopt;
+  if (!residuals_agree(g) || !views_agree(g) || !(baseline(g.n) >= config_.min_baseline)) return std::nullopt;
 
   const HLineObservation& latest = observations_.back();
   const Pose6& x_ms = latest.view.x_ms;
@@ -270,8 +359,9 @@ std::optional<Extension> HLineFeature::extend_position() {
   const std::vector<double> weights = plane_weights(obs, g.t, Vec3(centre.x(), centre.y(), first->x[1]));
   const std::optional<PositionFit> fit = fit_position(obs, weights, g.t, centre, x_ms);
   if (!fit || !(fit->x[1] > latest.plane.o.z())) return std::nullopt;
-
   const Vec2 point = centre + fit->x[0] * g.n;
+  if (!well_conditioned(g, point, fit->x[1], fit->cov)) return std::nullopt;
+
   x_ = line_at(point, g.t, fit->x[1], false);
   anchor_ = foot_on_line(x_, point);
   mdim_ = 3;
@@ -306,6 +396,20 @@ std::vector<ParamSpec> HLineType::param_specs() {
                    0.0, 90.0),
       param_double("match_margin", d.match_margin,
                    "a segment must overlap the line, give or take this much, to match it (m)", 0.0),
+      param_double("consistency_probability", d.consistency_probability,
+                   "probability of the χ² tests that the planes are one line (a new plane at dims 0, 1 against the "
+                   "stored ones; all of them, and the cameras either side of each cut, before triangulation)",
+                   0.5, 1.0 - 1e-12),
+      param_double("inverse_height_sigma", d.inverse_height_sigma,
+                   "σ of the prior 1/initial_height on a line's inverse height above the camera in the tests of the "
+                   "planes (1/m)",
+                   0.001),
+      param_double("max_height_sigma", d.max_height_sigma,
+                   "largest σ of the triangulated height, as a fraction of the height above the camera", 0.0),
+      param_double("max_ray_gap", d.max_ray_gap,
+                   "largest gap between the viewing rays' angles (normal to the line), as a fraction of their span, "
+                   "for the triangulation to enter",
+                   0.0, 1.0),
   };
 }
 
@@ -319,6 +423,10 @@ HLineType::HLineType(const PluginArgs& args) {
   config_.max_observations = static_cast<int>(p.get_int("max_observations"));
   config_.match_angle = p.get_double("match_angle") * kDegree;
   config_.match_margin = p.get_double("match_margin");
+  config_.consistency_probability = p.get_double("consistency_probability");
+  config_.inverse_height_sigma = p.get_double("inverse_height_sigma");
+  config_.max_height_sigma = p.get_double("max_height_sigma");
+  config_.max_ray_gap = p.get_double("max_ray_gap");
   if (config_.max_observations < config_.min_observations)
     throw std::invalid_argument("hline: max_observations (" + std::to_string(config_.max_observations) +
                                 ") must be at least min_observations (" + std::to_string(config_.min_observations) +

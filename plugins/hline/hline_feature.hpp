@@ -24,12 +24,40 @@
 // Dense information: per observation, the plane (c and its covariance in the
 // map), the camera centre, the rays to the two end points (map) and the path
 // distance; observations older than max_path_distance are pruned.
+//   dims 0, 1: a plane is stored only when it can belong to the line of the
+//          stored ones. At these dims c·t̂ is the same for every parallel
+//          line, so a parallel neighbour (the tile grid, 0.6 m) would
+//          otherwise leave its planes here and the triangulation would mix
+//          two lines. The test: seen from the new plane's camera, the stored
+//          planes give the slope and the inverse height of the ray to the
+//          line (least squares in inverse-height form, estimate_ray, with a
+//          prior N(1/initial_height, inverse_height_sigma²) for the height
+//          the planes do not fix yet); the new plane's angle must agree with
+//          that ray, χ²(1) at consistency_probability;
 //   0 → 1  after min_observations whose directions agree within
 //          max_direction_spread: the weighted mean direction, with the
 //          variance from C_v (inflated by the observed spread) and J_sensor
 //          for all observations turning with the sensor (a heading error
 //          turns the line with it);
-//   1 → 3  once the camera centres spread min_baseline normal to the line:
+//   1 → 3  once the camera centres spread min_baseline normal to the line,
+//          and only if the planes are one line seen well enough:
+//          (a) their χ² (inverse-height form, seen from the newest camera)
+//              passes at consistency_probability; if not, the plane with the
+//              largest deleted residual (its residual against the fit of all
+//              the others) is dropped from the dense information;
+//          (b) the cameras on either side of every cut across their
+//              positions agree (split_test, χ²(2) at consistency_probability)
+//              — a line's ray from one camera path can meet a neighbour's
+//              planes from a few other viewpoints in a wrong point that (a),
+//              summed over many planes, may miss; if not, the smaller side is
+//              dropped;
+//          (c) the least squares fixes the height: its σ at most
+//              max_height_sigma times the height above the camera;
+//          (d) the viewing rays to the line (in the plane normal to it)
+//              leave no gap wider than max_ray_gap times their angular span:
+//              two groups of rays always meet in a point, right or not; rays
+//              between them show whether it is right.
+//          Otherwise the line stays at dim 1 and waits for more views. Then:
 //          offset and height by least squares on the planes, with its
 //          covariance, J_sensor (everything moving rigidly with the sensor)
 //          and J_own (the dependence on the direction in the M-space);
@@ -61,6 +89,10 @@ struct HLineConfig {
   int max_observations = 100;
   double match_angle = 0.087;  ///< rad (5°)
   double match_margin = 0.5;   ///< m
+  double consistency_probability = 0.99;  ///< of the χ² tests that planes are one line
+  double inverse_height_sigma = 0.25;     ///< 1/m, σ of the prior 1/initial_height in those tests
+  double max_height_sigma = 0.02;         ///< largest σ of the triangulated height / height above the camera
+  double max_ray_gap = 0.4;               ///< largest gap between the viewing rays / their angular span
 };
 
 /// One observation kept as dense information.
@@ -109,6 +141,27 @@ class HLineFeature : public Feature {
   /// it; with `grow` (or when no ray gives an extent) the current ends,
   /// projected onto it, count too.
   Vec6 line_at(const Vec2& point, const Vec2& t, double z, bool grow) const;
+  /// Spread of the stored camera centres along the normal n.
+  double baseline(const Vec2& n) const;
+  /// The prior on the inverse height of the tests.
+  InverseHeightPrior height_prior() const;
+  /// The inverse-height fit of the stored planes seen from q, the weights
+  /// taken at the point `at`.
+  std::optional<RayEstimate> estimate_from(const LineGeometry& g, const Vec3& q, const Vec3& at) const;
+  /// The same seen from the newest camera, fitted a second time with the
+  /// weights at the first fit's point; that point in `at`.
+  std::optional<RayEstimate> estimate_from_newest(const LineGeometry& g, Vec3& at) const;
+  /// Dims 0, 1: whether `plane` agrees with the ray the stored planes give.
+  bool consistent_with_stored(const PlaneObservation& plane) const;
+  /// 1 → 3, test (a): whether the stored planes pass the χ² test; if not,
+  /// drops the one with the largest deleted residual.
+  bool residuals_agree(const LineGeometry& g);
+  /// 1 → 3, test (b): whether the cameras on either side of every cut agree;
+  /// if not, drops the planes on the smaller side.
+  bool views_agree(const LineGeometry& g);
+  /// 1 → 3, tests (c) and (d) for the line through `point` at height z, its
+  /// (o, z) covariance `cov`.
+  bool well_conditioned(const LineGeometry& g, const Vec2& point, double z, const Mat2& cov) const;
   std::optional<Extension> extend_direction();
   std::optional<Extension> extend_position();
 

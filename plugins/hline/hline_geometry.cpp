@@ -64,12 +64,30 @@ struct LineFrame {
       : T(horizontal(t)), N(horizontal(normal_of(t))), Pt(Mat3::Identity() - T * T.transpose()) {}
 };
 
-/// One plane as a row of the least-squares problem A x = b, x = (o, z), with
-/// the derivatives of A and b with respect to the parameters.
-struct PlaneRow {
-  Eigen::RowVector2d A;
+/// One plane as a row A x = b of a least-squares problem in two unknowns,
+/// with weight w: (o, z) for fit_position, (s, ρ) for estimate_ray.
+struct CrossSectionRow {
+  Eigen::RowVector2d A = Eigen::RowVector2d::Zero();
   double b = 0.0;
   double w = 0.0;
+};
+
+/// Whether the plane holds a line of direction t (c̃ is defined) and counts.
+bool usable(const PlaneObservation& p, double w, const LineFrame& f) { return w > 0.0 && (f.Pt * p.c).norm() > 1e-9; }
+
+// P = pivot + o N + z Z, so c̃·(P − o_i) = 0 reads (c̃·N) o + (c̃·Z) z = c̃·(o_i − pivot):
+// the residual b − A x is c̃·(P − o_i).
+CrossSectionRow cross_section_row(const PlaneObservation& p, double w, const LineFrame& f, const Vec3& pivot) {
+  const Vec3 ct = (f.Pt * p.c).normalized();
+  CrossSectionRow row;
+  row.A << ct.dot(f.N), ct.z();
+  row.b = ct.dot(p.o - pivot);
+  row.w = w;
+  return row;
+}
+
+/// The derivatives of a row's A and b with respect to the parameters.
+struct RowDerivatives {
   Eigen::Matrix<double, 2, kParams> dA;  ///< column j: ∂Aᵀ/∂param_j
   RowParams db;
 };
@@ -77,25 +95,43 @@ struct PlaneRow {
 // Residual r = c̃·(P − o), c̃ = P_t c/|P_t c|. The parameters move c
 // (δc = ω × c) and o (δo = δs + ω × (o − s)) for the sensor pose, and
 // T (δT = −N δα) and N (δN = T δα) for α, so δ(P_t c) = N (T·c) + T (N·c).
-PlaneRow plane_row(const PlaneObservation& p, double w, const LineFrame& f, const Vec3& pivot, const Pose6& x_ms) {
+RowDerivatives row_derivatives(const PlaneObservation& p, const LineFrame& f, const Vec3& pivot, const Pose6& x_ms) {
   const Vec3 Z = Vec3::UnitZ();
   const Vec3 pc = f.Pt * p.c;
   const Vec3 ct = pc.normalized();
   const Mat3 Q = normalisation_jacobian(pc);
-  PlaneRow row;
-  row.A << ct.dot(f.N), ct.dot(Z);
-  row.b = ct.dot(p.o - pivot);
-  row.w = w;
-
   Eigen::Matrix<double, 3, kParams> d_pc, d_o = Eigen::Matrix<double, 3, kParams>::Zero();
   d_pc.leftCols<6>() = f.Pt * turn_with_sensor(p.c, x_ms);
   d_pc.col(6) = f.N * f.T.dot(p.c) + f.T * f.N.dot(p.c);
   d_o.leftCols<6>() = move_with_sensor(p.o, x_ms);
   const Eigen::Matrix<double, 3, kParams> d_ct = Q * d_pc;
-  row.dA.row(0) = f.N.transpose() * d_ct;  // + c̃·δN, which is 0 (c̃ ⟂ T)
-  row.dA.row(1) = Z.transpose() * d_ct;
-  row.db = (p.o - pivot).transpose() * d_ct + ct.transpose() * d_o;
-  return row;
+  RowDerivatives d;
+  d.dA.row(0) = f.N.transpose() * d_ct;  // + c̃·δN, which is 0 (c̃ ⟂ T)
+  d.dA.row(1) = Z.transpose() * d_ct;
+  d.db = (p.o - pivot).transpose() * d_ct + ct.transpose() * d_o;
+  return d;
+}
+
+/// The weighted least squares of rows: x = H⁻¹ Σ w Aᵀb, H = Σ w AᵀA.
+/// std::nullopt with fewer than two rows or when H is (nearly) singular.
+struct RowSolution {
+  Vec2 x = Vec2::Zero();
+  Mat2 H_inv = Mat2::Zero();
+};
+std::optional<RowSolution> solve_rows(const std::vector<CrossSectionRow>& rows) {
+  if (rows.size() < 2) return std::nullopt;
+  Mat2 H = Mat2::Zero();
+  Vec2 g = Vec2::Zero();
+  for (const CrossSectionRow& r : rows) {
+    H += r.w * r.A.transpose() * r.A;
+    g += r.w * r.A.transpose() * r.b;
+  }
+  const Eigen::SelfAdjointEigenSolver<Mat2> eig(H);
+  if (!(eig.eigenvalues()[0] > 1e-12 * eig.eigenvalues()[1])) return std::nullopt;
+  RowSolution s;
+  s.H_inv = H.inverse();
+  s.x = s.H_inv * g;
+  return s;
 }
 
 /// Reduced χ² inflation: the formal covariance is kept unless the residuals
@@ -338,36 +374,151 @@ std::vector<double> plane_weights(const std::vector<PlaneObservation>& planes, c
 std::optional<PositionFit> fit_position(const std::vector<PlaneObservation>& planes, const std::vector<double>& weights,
                                         const Vec2& t, const Vec2& pivot, const Pose6& x_ms) {
   const LineFrame f(t);
-  std::vector<PlaneRow> rows;
-  for (std::size_t i = 0; i < planes.size(); ++i)
-    if (weights[i] > 0.0 && (f.Pt * planes[i].c).norm() > 1e-9)
-      rows.push_back(plane_row(planes[i], weights[i], f, horizontal(pivot), x_ms));
-  if (rows.size() < 2) return std::nullopt;
-
-  Mat2 H = Mat2::Zero();
-  Vec2 g = Vec2::Zero();
-  for (const PlaneRow& r : rows) {
-    H += r.w * r.A.transpose() * r.A;
-    g += r.w * r.A.transpose() * r.b;
+  std::vector<CrossSectionRow> rows;
+  std::vector<RowDerivatives> derivatives;
+  for (std::size_t i = 0; i < planes.size(); ++i) {
+    if (!usable(planes[i], weights[i], f)) continue;
+    rows.push_back(cross_section_row(planes[i], weights[i], f, horizontal(pivot)));
+    derivatives.push_back(row_derivatives(planes[i], f, horizontal(pivot), x_ms));
   }
-  const Eigen::SelfAdjointEigenSolver<Mat2> eig(H);
-  if (!(eig.eigenvalues()[0] > 1e-12 * eig.eigenvalues()[1])) return std::nullopt;
-  const Mat2 H_inv = H.inverse();
+  const std::optional<RowSolution> ls = solve_rows(rows);
+  if (!ls) return std::nullopt;
 
   PositionFit fit;
-  fit.x = H_inv * g;
+  fit.x = ls->x;
   Eigen::Matrix<double, 2, kParams> rhs = Eigen::Matrix<double, 2, kParams>::Zero();
-  for (const PlaneRow& r : rows) {
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const CrossSectionRow& r = rows[k];
+    const RowDerivatives& d = derivatives[k];
     const double residual = r.b - r.A.dot(fit.x);
     fit.chi2 += r.w * residual * residual;
-    const RowParams dAx = fit.x.transpose() * r.dA;
-    rhs += r.w * (r.dA * residual + r.A.transpose() * (r.db - dAx));
+    const RowParams dAx = fit.x.transpose() * d.dA;
+    rhs += r.w * (d.dA * residual + r.A.transpose() * (d.db - dAx));
   }
-  fit.cov = inflation(fit.chi2, static_cast<int>(rows.size()) - 2) * H_inv;
-  const Eigen::Matrix<double, 2, kParams> J = H_inv * rhs;
+  fit.cov = inflation(fit.chi2, static_cast<int>(rows.size()) - 2) * ls->H_inv;
+  const Eigen::Matrix<double, 2, kParams> J = ls->H_inv * rhs;
   fit.J_pose = J.leftCols<6>();
   fit.J_alpha = J.col(6);
   return fit;
+}
+
+// ---------------------------------------------------------------- consistency of the planes
+
+/// The row of plane p in the inverse-height form (estimate_ray): ρ c̃·(P − o)
+/// = A x − b with A = (c̃·n, c̃·(q − o)), b = −c̃_z; weight w/ρ², its noise
+/// being ρ times that of c̃·(P − o).
+CrossSectionRow ray_row(const PlaneObservation& p, double w, const LineFrame& f, const Vec3& q, double rho) {
+  const Vec3 ct = (f.Pt * p.c).normalized();
+  CrossSectionRow row;
+  row.A << ct.dot(f.N), ct.dot(q - p.o);
+  row.b = -ct.z();
+  row.w = w / (rho * rho);
+  return row;
+}
+
+// The deleted residual of row k: with the other rows alone x would be x_(k),
+// and e_(k) = e/(1 − h), Var e_(k) = (1/w)/(1 − h), so its χ² is
+// w e²/(1 − h) (leave-one-out, with no refit needed).
+std::optional<RayEstimate> estimate_ray(const std::vector<PlaneObservation>& planes, const std::vector<double>& weights,
+                                        const Vec2& t, const Vec3& q, double rho,
+                                        const std::optional<InverseHeightPrior>& prior) {
+  const LineFrame f(t);
+  std::vector<CrossSectionRow> rows;
+  std::vector<std::size_t> index;  // the plane of each row
+  for (std::size_t i = 0; i < planes.size(); ++i) {
+    if (!usable(planes[i], weights[i], f)) continue;
+    rows.push_back(ray_row(planes[i], weights[i], f, q, rho));
+    index.push_back(i);
+  }
+  if (prior) rows.push_back({Eigen::RowVector2d(0.0, 1.0), prior->rho, 1.0 / (prior->sigma * prior->sigma)});
+  const std::optional<RowSolution> ls = solve_rows(rows);
+  if (!ls) return std::nullopt;
+
+  RayEstimate e;
+  e.x = ls->x;
+  e.cov = ls->H_inv;
+  e.rows = static_cast<int>(rows.size());
+  e.deleted_chi2.assign(planes.size(), 0.0);
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const CrossSectionRow& r = rows[k];
+    const double residual = r.b - r.A.dot(e.x);
+    e.chi2 += r.w * residual * residual;
+    if (k >= index.size()) continue;  // the prior
+    const double leverage = r.w * r.A.dot(e.cov * r.A.transpose());
+    e.deleted_chi2[index[k]] = leverage < 1.0 - 1e-9 ? r.w * residual * residual / (1.0 - leverage)
+                                                     : std::numeric_limits<double>::infinity();
+  }
+  return e;
+}
+
+Vec3 ray_point(const RayEstimate& estimate, const Vec2& t, const Vec3& q) {
+  const LineFrame f(t);
+  return q + (estimate.x[0] * f.N + Vec3::UnitZ()) / estimate.x[1];
+}
+
+double plane_chi2(const PlaneObservation& plane, double w, const Vec2& t, const Vec3& q, double rho,
+                  const RayEstimate& estimate) {
+  const LineFrame f(t);
+  if (!usable(plane, w, f)) return std::numeric_limits<double>::infinity();
+  const CrossSectionRow r = ray_row(plane, w, f, q, rho);
+  const double residual = r.b - r.A.dot(estimate.x);
+  return residual * residual / (1.0 / r.w + r.A.dot(estimate.cov * r.A.transpose()));
+}
+
+// Prefix sums of the normal equations over the planes sorted by camera
+// offset give both sides of every cut in one pass.
+SplitTest split_test(const std::vector<PlaneObservation>& planes, const std::vector<double>& weights, const Vec2& t,
+                     const Vec3& q, double rho, const InverseHeightPrior& prior) {
+  const LineFrame f(t);
+  std::vector<std::size_t> order;
+  for (std::size_t i = 0; i < planes.size(); ++i)
+    if (usable(planes[i], weights[i], f)) order.push_back(i);
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return f.N.dot(planes[a].o) < f.N.dot(planes[b].o); });
+
+  const std::size_t m = order.size();
+  std::vector<Mat2> H(m + 1, Mat2::Zero());  // H[k], g[k]: sums over the first k planes
+  std::vector<Vec2> g(m + 1, Vec2::Zero());
+  for (std::size_t k = 0; k < m; ++k) {
+    const CrossSectionRow r = ray_row(planes[order[k]], weights[order[k]], f, q, rho);
+    H[k + 1] = H[k] + r.w * r.A.transpose() * r.A;
+    g[k + 1] = g[k] + r.w * r.A.transpose() * r.b;
+  }
+  const double w_prior = 1.0 / (prior.sigma * prior.sigma);
+  const Mat2 H_prior = Eigen::Vector2d(0.0, w_prior).asDiagonal();
+  const Vec2 g_prior(0.0, w_prior * prior.rho);
+
+  SplitTest test;
+  constexpr std::size_t kMinSide = 2;
+  for (std::size_t k = kMinSide; m >= 2 * kMinSide && k + kMinSide <= m; ++k) {
+    const Mat2 H1 = H[k] + H_prior, H2 = H[m] - H[k] + H_prior;
+    if (!(H1.determinant() > 0.0 && H2.determinant() > 0.0)) continue;
+    const Mat2 C1 = H1.inverse(), C2 = H2.inverse();
+    const Vec2 dx = C1 * (g[k] + g_prior) - C2 * (g[m] - g[k] + g_prior);
+    const double chi2 = dx.dot((C1 + C2).ldlt().solve(dx));
+    if (!(chi2 > test.chi2)) continue;
+    test.chi2 = chi2;
+    const auto cut = order.begin() + static_cast<std::ptrdiff_t>(k);
+    if (k <= m - k)
+      test.smaller.assign(order.begin(), cut);
+    else
+      test.smaller.assign(cut, order.end());
+  }
+  return test;
+}
+
+RaySpread ray_spread(const std::vector<PlaneObservation>& planes, const Vec2& t, const Vec3& P) {
+  RaySpread spread;
+  if (planes.empty()) return spread;
+  const Vec3 N = horizontal(normal_of(t));
+  std::vector<double> angles;
+  angles.reserve(planes.size());
+  for (const PlaneObservation& p : planes) angles.push_back(std::atan2(N.dot(P - p.o), P.z() - p.o.z()));
+  std::sort(angles.begin(), angles.end());
+  spread.span = angles.back() - angles.front();
+  for (std::size_t i = 1; i < angles.size(); ++i)
+    spread.largest_gap = std::max(spread.largest_gap, angles[i] - angles[i - 1]);
+  return spread;
 }
 
 }  // namespace mspace::hline

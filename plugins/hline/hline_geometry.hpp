@@ -162,4 +162,79 @@ struct PositionFit {
 std::optional<PositionFit> fit_position(const std::vector<PlaneObservation>& planes, const std::vector<double>& weights,
                                         const Vec2& t, const Vec2& pivot, const Pose6& x_ms);
 
+// ---------------------------------------------------------------- consistency of the planes
+
+/// The least squares of the planes in inverse-height form, to test whether
+/// they belong to one line. Seen from a reference camera centre q, the
+/// line's point in the vertical plane normal to t is
+///   P = q + (s n + ẑ)/ρ,
+/// s the slope (horizontal over vertical) of the ray from q and ρ the
+/// inverse height above q. A plane's residual times ρ,
+///   ρ c̃_i·(P − o_i) = s c̃_i·n + ρ c̃_i·(q − o_i) + c̃_i·ẑ,
+/// is linear in x = (s, ρ), with noise ρ σ_r,i. Unlike (offset, height),
+/// this cannot drift to the cameras when the planes come from one camera
+/// path parallel to the line (all such planes meet there): a plane seen
+/// from q itself constrains the slope alone, whatever the height.
+struct RayEstimate {
+  Vec2 x = Vec2::Zero();    ///< (s, ρ)
+  Mat2 cov = Mat2::Zero();  ///< (AᵀWA)⁻¹, not inflated
+  double chi2 = 0.0;        ///< Σ w e² over all rows, the prior's included
+  int rows = 0;             ///< planes used (nonzero weight, holding the direction), plus the prior
+  /// Per plane, in input order: the χ² of its deleted residual — its
+  /// residual against the fit of all the other rows, w e²/(1 − h), h its
+  /// leverage w A cov Aᵀ (+∞ when the others do not fix x); 0 for a plane
+  /// not used.
+  std::vector<double> deleted_chi2;
+};
+/// A Gaussian prior N(ρ, σ²) on the inverse height above q (1/m): with it,
+/// planes from one viewpoint fix x too.
+struct InverseHeightPrior {
+  double rho = 0.5;
+  double sigma = 0.25;
+};
+/// `weights` are those of the residuals in metres (plane_weights); `rho`
+/// is the inverse height at which they hold (the noise of ρ r is ρ σ_r).
+/// std::nullopt when x is not determined.
+std::optional<RayEstimate> estimate_ray(const std::vector<PlaneObservation>& planes, const std::vector<double>& weights,
+                                        const Vec2& t, const Vec3& q, double rho,
+                                        const std::optional<InverseHeightPrior>& prior = std::nullopt);
+
+/// The point P (x, y, z) of `estimate` (made with t and q).
+Vec3 ray_point(const RayEstimate& estimate, const Vec2& t, const Vec3& q);
+
+/// χ² of a plane that is not part of `estimate` (made with t, q and rho),
+/// with weight w (plane_weights): its scaled residual squared over its
+/// variance, estimate's uncertainty included. For a plane seen from q
+/// itself, a test of its angle against the ray's. +∞ for a plane that
+/// holds no line of direction t or has zero weight.
+double plane_chi2(const PlaneObservation& plane, double w, const Vec2& t, const Vec3& q, double rho,
+                  const RayEstimate& estimate);
+
+/// The worst disagreement between the planes seen from either side of a cut
+/// across the camera positions. The usable planes are sorted by their
+/// camera centre's offset along n; every cut that leaves at least two on
+/// either side splits them into two sets, each fitted alone in the
+/// inverse-height form of estimate_ray (each with the prior); for one line
+/// the difference of the two fits is χ²(2) = Δxᵀ (cov_1 + cov_2)⁻¹ Δx. It
+/// finds what the total χ² dilutes over many planes and no single plane
+/// shows: one line's ray from a camera path parallel to it meeting a
+/// neighbour's planes from a few other viewpoints in a wrong point.
+struct SplitTest {
+  double chi2 = 0.0;                 ///< the largest over the cuts (0 without a cut)
+  std::vector<std::size_t> smaller;  ///< at that cut, the planes (input indices) on the side with fewer
+};
+SplitTest split_test(const std::vector<PlaneObservation>& planes, const std::vector<double>& weights, const Vec2& t,
+                     const Vec3& q, double rho, const InverseHeightPrior& prior);
+
+/// The viewing rays from the camera centres to the point P (x, y, z) of a
+/// line of direction t, in the vertical plane normal to t: their angles from
+/// the vertical, atan2(n·(P − o_i), P_z − o_z,i). Two groups of rays with a
+/// gap between them always meet in a point, right or not; only rays in
+/// between can show that it is wrong.
+struct RaySpread {
+  double span = 0.0;         ///< largest − smallest angle (rad)
+  double largest_gap = 0.0;  ///< largest gap between neighbouring angles (rad)
+};
+RaySpread ray_spread(const std::vector<PlaneObservation>& planes, const Vec2& t, const Vec3& P);
+
 }  // namespace mspace::hline
