@@ -31,6 +31,25 @@ constexpr double kRotationWeightMetresPerRadian = 2.0;
 
 bool all_finite(const Eigen::MatrixXd& m) { return m.allFinite(); }
 
+/// The directions of the robot's estimated pose coordinates `dofs` along which
+/// a global planar motion of robot and map moves them, at `pose`: one column
+/// each for translation along the map's x and y axes and rotation about its z
+/// axis through the origin (a rotation by δ moves (x, y) by δ·(−y, x) and the
+/// heading θ by δ). Other coordinates (z, φ, ψ) do not move; a column that
+/// touches no estimated coordinate is left out. For Estimator::set_unobservable.
+Eigen::MatrixXd planar_global_motion(const Pose6& pose, const std::vector<int>& dofs) {
+  Eigen::Matrix<double, 6, 3> all = Eigen::Matrix<double, 6, 3>::Zero();
+  all.row(kX) << 1.0, 0.0, -pose[kY];
+  all.row(kY) << 0.0, 1.0, pose[kX];
+  all.row(kTheta) << 0.0, 0.0, 1.0;
+  Eigen::MatrixXd rows(static_cast<Eigen::Index>(dofs.size()), 3);
+  for (std::size_t i = 0; i < dofs.size(); ++i) rows.row(static_cast<Eigen::Index>(i)) = all.row(dofs[i]);
+  std::vector<Eigen::Index> kept;
+  for (Eigen::Index c = 0; c < 3; ++c)
+    if (!rows.col(c).isZero(0.0)) kept.push_back(c);
+  return rows(Eigen::all, kept);
+}
+
 /// Throws a PluginError naming the instance when a plugin hands back NaN/inf.
 void require_finite(const Eigen::MatrixXd& m, const char* what, const std::string& instance,
                     const LoadedPlugin& lib) {
@@ -150,6 +169,9 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry) : config_(config) 
   Eigen::MatrixXd P0 = Eigen::MatrixXd::Zero(k, k);
   for (int i = 0; i < k; ++i) P0(i, i) = config_.initial_sigma[dofs_[i]] * config_.initial_sigma[dofs_[i]];
   guarded(config_.estimator.instance, *estimator_lib_, "reset", [&] { estimator_->reset(P0); });
+  const Eigen::MatrixXd U_r = planar_global_motion(x_r_, dofs_);
+  guarded(config_.estimator.instance, *estimator_lib_, "set_unobservable",
+          [&] { estimator_->set_unobservable(U_r); });
 }
 
 Slam::~Slam() {
@@ -295,7 +317,7 @@ SensorView Slam::sensor_view(int sensor_index, double t) const {
 }
 
 // Every sensor on the reading's channel extracts from it (one camera can feed
-// a line extractor and a lamp extractor), one after the other, each with its
+// a line extractor and a point extractor), one after the other, each with its
 // own association and update.
 void Slam::process_reading(const SensorReading& reading, std::vector<ReadingWork>& work) {
   ++stats_.readings;

@@ -17,6 +17,20 @@
 //
 // Symmetric inputs (P_rr, Q, C_eta, C_new) are read from their lower triangle.
 //
+// Observability-constrained mode (optional; Huang, Mourikis & Roumeliotis,
+// "Observability-based rules for designing consistent EKF SLAM estimators",
+// IJRR 2010). The global rigid motion of robot and map is unobservable, but
+// the plain EKF, which linearises each step at a different estimate, gains
+// spurious information along it and becomes overconfident. In this mode the
+// filter carries the unobservable directions U (dim() × u, one column per
+// direction) exactly as the covariance carries the state: set_unobservable()
+// gives the robot's rows, predict() maps them (U_r ← J_rr U_r, eq. 26's
+// J_rr), augment() appends J U[idx] for the new rows, remove() drops rows. Each
+// observation's Jacobian is replaced by the nearest one (row by row, within
+// its own columns) that annihilates U[idx]: J ← J − J U_i (U_iᵀ U_i)⁺ U_iᵀ, so
+// no update informs the unobservable directions. Without set_unobservable()
+// (u = 0) it behaves as the plain filter.
+//
 // Errors (all thrown before anything is changed):
 //   std::invalid_argument — wrong sizes, indices out of range or repeated, or a
 //     non-finite entry; the message names the matrix and the row, e.g.
@@ -34,8 +48,9 @@ namespace mspace::ekf {
 
 class EkfFilter final : public Estimator {
  public:
-  /// `initial_capacity`: state rows to allocate room for at reset() (≥ 1).
-  explicit EkfFilter(int initial_capacity = 64);
+  /// `initial_capacity`: state rows to allocate room for at reset() (≥ 1);
+  /// `observability_constrained`: the mode described above.
+  explicit EkfFilter(int initial_capacity = 64, bool observability_constrained = false);
 
   void reset(const Eigen::MatrixXd& P_rr) override;
   int dim() const override { return n_; }
@@ -45,6 +60,10 @@ class EkfFilter final : public Estimator {
   Eigen::MatrixXd marginal(const std::vector<int>& idx) const override;
   Eigen::MatrixXd cross(const std::vector<int>& rows, const std::vector<int>& cols) const override;
   void remove(std::vector<int> idx) override;
+  /// Observability-constrained mode only (ignored otherwise): replaces the
+  /// robot's rows of U by U_r (robot_dim() × u). Feature rows keep their
+  /// propagated values when u is unchanged and start at zero otherwise.
+  void set_unobservable(const Eigen::MatrixXd& U_r) override;
 
   /// Robot pose dimension k given to reset().
   int robot_dim() const { return k_; }
@@ -54,14 +73,24 @@ class EkfFilter final : public Estimator {
   void reserve(int rows);
   /// The whole covariance C_state (dim() × dim()), for tests and diagnostics.
   Eigen::MatrixXd covariance() const;
+  bool observability_constrained() const { return constrained_; }
+  /// The unobservable directions U (dim() × u) in observability-constrained
+  /// mode; 0 × 0 otherwise.
+  const Eigen::MatrixXd& unobservable() const { return U_; }
 
  private:
   /// C_state(i, j) read from the lower triangle.
   double at(int i, int j) const { return i >= j ? store_(i, j) : store_(j, i); }
   /// C_state[:, cols] (dim() × cols.size()).
   Eigen::MatrixXd gather_columns(const std::vector<int>& cols) const;
+  /// eqs. 28–32 for the given (possibly constrained) observations.
+  Eigen::VectorXd apply_update(const std::vector<LinearizedObservation>& obs);
+  /// The observations with every J made to annihilate U[idx] (constrained mode).
+  std::vector<LinearizedObservation> constrained_observations(const std::vector<LinearizedObservation>& obs) const;
 
   int initial_capacity_;
+  bool constrained_;       ///< observability-constrained mode
+  Eigen::MatrixXd U_;      ///< dim() × u unobservable directions (constrained mode only)
   int k_ = 0;              ///< robot pose dimension
   int n_ = 0;              ///< state dimension
   Eigen::MatrixXd store_;  ///< capacity × capacity; lower triangle of [0,n_)² is C_state

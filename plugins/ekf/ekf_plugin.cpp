@@ -8,7 +8,7 @@ namespace {
 
 std::unique_ptr<mspace::PluginObject> make_ekf(const mspace::PluginArgs& args) {
   const auto capacity = static_cast<int>(args.params.get_int("initial_capacity"));
-  return std::make_unique<mspace::ekf::EkfFilter>(capacity);
+  return std::make_unique<mspace::ekf::EkfFilter>(capacity, args.params.get_bool("observability_constrained"));
 }
 
 mspace::PluginDescriptor describe() {
@@ -24,6 +24,11 @@ mspace::PluginDescriptor describe() {
                         "state rows to allocate room for at reset; the storage doubles "
                         "when the state outgrows it",
                         1, 1'000'000),
+      mspace::param_bool("observability_constrained", false,
+                         "observability-constrained EKF (Huang, Mourikis & Roumeliotis, IJRR 2010): "
+                         "carry the unobservable global motion of robot and map through every step "
+                         "and project it out of each observation's Jacobian, so no update "
+                         "informs it"),
   };
   d.factory = &make_ekf;
   return d;

@@ -107,14 +107,16 @@ void expect_throw_message(const std::function<void()>& call, const std::string& 
 
 /// A filter with robot dimension 3 and features of 2, 3 and 1 rows appended with
 /// random Jacobians, and the same covariance built with the dense formula.
+/// With `U_r`, the filter is observability-constrained with robot directions U_r.
 struct RandomState {
-  EkfFilter filter{4};
+  EkfFilter filter;
   DenseKalman dense;
 
-  explicit RandomState(unsigned seed) {
+  explicit RandomState(unsigned seed, const MatrixXd* U_r = nullptr) : filter(4, U_r != nullptr) {
     std::mt19937 rng(seed);
     const MatrixXd P_rr = random_spd(3, rng, 0.5);
     filter.reset(P_rr);
+    if (U_r) filter.set_unobservable(*U_r);
     dense.x = VectorXd::Zero(3);
     dense.P = P_rr;
     add({0, 2}, random_matrix(2, 2, rng), random_spd(2, rng, 0.2));
@@ -536,6 +538,133 @@ TEST(EkfUpdate, InnovationCovarianceNotPositiveDefiniteIsAnError) {
   expect_throw_message<std::runtime_error>([&] { s.filter.update({o}); },
                                            "ekf update: S (2 x 2) is not positive definite");
   EXPECT_EQ(max_abs_diff(s.filter.covariance(), before), 0.0);
+}
+
+// ---------------------------------------------------------------------------
+// Observability-constrained mode (Huang, Mourikis & Roumeliotis, IJRR 2010).
+
+/// Global planar motion of a robot (x, y, θ) at (x, y): translation along x,
+/// along y, rotation about the origin.
+MatrixXd global_motion(double x, double y) { return MatrixXd{{1, 0, -y}, {0, 1, x}, {0, 0, 1}}; }
+
+/// The Jacobian of a planar odometry step that moves the robot by (dx, dy) in
+/// the map: ∂(x', y')/∂θ = (−dy, dx), everything else the identity.
+MatrixXd odometry_jacobian(double dx, double dy) { return MatrixXd{{1, 0, -dy}, {0, 1, dx}, {0, 0, 1}}; }
+
+TEST(EkfObservabilityConstrained, DirectionsFollowPredictAugmentAndRemove) {
+  EkfFilter f(4, true);
+  f.reset(MatrixXd::Identity(3, 3));
+  f.set_unobservable(global_motion(1.0, 2.0));
+  EXPECT_EQ(max_abs_diff(f.unobservable(), global_motion(1.0, 2.0)), 0.0);
+
+  // (1, 2) → (1.3, 2.5): U_r ← J_rr U_r is the global motion at the new pose.
+  f.predict(odometry_jacobian(0.3, 0.5), 0.01 * MatrixXd::Identity(3, 3));
+  EXPECT_LT(max_abs_diff(f.unobservable(), global_motion(1.3, 2.5)), kTol);
+
+  // A point p = (x − θ, y + 2θ): rows J U[0..2] = (1, 0, −2.5 − 1), (0, 1, 1.3 + 2).
+  f.augment(StateAugmentation{{0, 1, 2}, MatrixXd{{1, 0, -1}, {0, 1, 2}}, 0.1 * MatrixXd::Identity(2, 2)});
+  // One row 2·δx[4] − δx[3]: 2·(0, 1, 3.3) − (1, 0, −3.5) = (−1, 2, 10.1).
+  f.augment(StateAugmentation{{4, 3}, MatrixXd{{2, -1}}, MatrixXd::Constant(1, 1, 0.1)});
+  // One row that depends on nothing: no motion.
+  f.augment(StateAugmentation{{}, MatrixXd(1, 0), MatrixXd::Constant(1, 1, 0.1)});
+  // (1.3, 2.5) → (1.1, 2.5): only the robot rows move.
+  f.predict(odometry_jacobian(-0.2, 0.0), 0.01 * MatrixXd::Identity(3, 3));
+  const MatrixXd before_remove{{1, 0, -2.5}, {0, 1, 1.1}, {0, 0, 1},   {1, 0, -3.5},
+                               {0, 1, 3.3},  {-1, 2, 10.1}, {0, 0, 0}};
+  EXPECT_LT(max_abs_diff(f.unobservable(), before_remove), kTol);
+
+  f.remove({5, 3});
+  const MatrixXd after_remove{{1, 0, -2.5}, {0, 1, 1.1}, {0, 0, 1}, {0, 1, 3.3}, {0, 0, 0}};
+  EXPECT_LT(max_abs_diff(f.unobservable(), after_remove), kTol);
+  EXPECT_EQ(f.dim(), 5);
+}
+
+/// An observation of two rows over `idx` with the given Jacobian.
+LinearizedObservation observation(const std::vector<int>& idx, const MatrixXd& J) {
+  return LinearizedObservation{VectorXd{{0.3, -0.2}}, MatrixXd{{0.05, 0.01}, {0.01, 0.04}}, idx, J};
+}
+
+TEST(EkfObservabilityConstrained, JacobianAlongTheDirectionsChangesNothing) {
+  const MatrixXd U_r = global_motion(0.7, -1.2);
+  RandomState constrained(31, &U_r);
+  RandomState plain(31);
+  const std::vector<int> idx = {0, 1, 2, 4, 6};
+  // Every row of J is a combination of the rows of U[idx]ᵀ: J lies in the
+  // unobservable directions.
+  const MatrixXd Ui = constrained.filter.unobservable()(idx, Eigen::all);
+  const MatrixXd J = MatrixXd{{1.0, -2.0, 0.5}, {0.3, 0.0, 4.0}} * Ui.transpose();
+
+  const MatrixXd before = constrained.filter.covariance();
+  const VectorXd dx = constrained.filter.update({observation(idx, J)});
+  EXPECT_LT(dx.cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT(max_abs_diff(constrained.filter.covariance(), before), 1e-12);
+
+  // The plain filter takes it as real information.
+  const VectorXd dx_plain = plain.filter.update({observation(idx, J)});
+  EXPECT_GT(dx_plain.cwiseAbs().maxCoeff(), 1e-2);
+  EXPECT_GT(max_abs_diff(plain.filter.covariance(), before), 1e-2);
+}
+
+TEST(EkfObservabilityConstrained, UpdateUsesTheProjectedJacobianAndAddsNoInformationAlongU) {
+  const MatrixXd U_r = global_motion(2.0, 0.5);
+  RandomState constrained(32, &U_r);
+  RandomState plain(32);
+  std::mt19937 rng(33);
+  const std::vector<int> idx = {0, 1, 2, 4, 6};
+  const MatrixXd J = random_matrix(2, 5, rng);
+  const MatrixXd U = constrained.filter.unobservable();
+  ASSERT_EQ(U.rows(), 9);
+  const MatrixXd Ui = U(idx, Eigen::all);  // 5 × 3, full column rank
+  const MatrixXd J_projected = J * (MatrixXd::Identity(5, 5) - Ui * (Ui.transpose() * Ui).inverse() * Ui.transpose());
+
+  const MatrixXd info_before = constrained.filter.covariance().inverse();
+  const VectorXd dx = constrained.filter.update({observation(idx, J)});
+  const VectorXd dx_plain = plain.filter.update({observation(idx, J_projected)});
+  EXPECT_LT(max_abs_diff(dx, dx_plain), kTol);
+  EXPECT_LT(max_abs_diff(constrained.filter.covariance(), plain.filter.covariance()), kTol);
+
+  // The information gained, C⁺⁻¹ − C⁻¹ = Hᵀ C_η⁻¹ H, is zero along U.
+  const MatrixXd gained = constrained.filter.covariance().inverse() - info_before;
+  EXPECT_GT(gained.cwiseAbs().maxCoeff(), 1.0);
+  EXPECT_LT((U.transpose() * gained * U).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+/// Predict, augment, update and remove on `f`; returns the update's δx.
+VectorXd exercise(EkfFilter& f) {
+  f.reset(MatrixXd{{0.3, 0.02, 0.0}, {0.02, 0.2, 0.01}, {0.0, 0.01, 0.1}});
+  f.predict(odometry_jacobian(0.4, -0.1), 0.01 * MatrixXd::Identity(3, 3));
+  f.augment(StateAugmentation{{0, 2}, MatrixXd{{1, 0.5}, {0.2, 1}}, 0.1 * MatrixXd::Identity(2, 2)});
+  f.augment(StateAugmentation{{1}, MatrixXd{{1}}, MatrixXd::Constant(1, 1, 0.2)});
+  const VectorXd dx = f.update({observation({0, 3, 5}, MatrixXd{{1, -1, 0.5}, {0.2, 0.3, -1}})});
+  f.remove({4});
+  return dx;
+}
+
+TEST(EkfObservabilityConstrained, OffOrWithoutDirectionsIsThePlainFilterBitForBit) {
+  EkfFilter plain(4), off(4, false), without(4, true);
+  const VectorXd dx_plain = exercise(plain);
+  off.set_unobservable(global_motion(1.0, 1.0));  // ignored when off
+  EXPECT_TRUE(exercise(off) == dx_plain);
+  EXPECT_TRUE(exercise(without) == dx_plain);
+  EXPECT_TRUE(off.covariance() == plain.covariance());
+  EXPECT_TRUE(without.covariance() == plain.covariance());
+  EXPECT_EQ(off.unobservable().size(), 0);
+  EXPECT_FALSE(off.observability_constrained());
+  EXPECT_TRUE(without.observability_constrained());
+  EXPECT_EQ(without.unobservable().rows(), 5);
+  EXPECT_EQ(without.unobservable().cols(), 0);
+}
+
+TEST(EkfObservabilityConstrained, DirectionsAreChecked) {
+  EkfFilter f(4, true);
+  f.reset(MatrixXd::Identity(3, 3));
+  expect_throw_message<std::invalid_argument>([&] { f.set_unobservable(MatrixXd::Ones(2, 3)); },
+                                              "ekf set_unobservable: U_r is 2 x 3, expected 3 x 3");
+  MatrixXd bad = global_motion(0.0, 0.0);
+  bad(1, 2) = std::numeric_limits<double>::quiet_NaN();
+  expect_throw_message<std::invalid_argument>([&] { f.set_unobservable(bad); },
+                                              "ekf set_unobservable: U_r row 1 is not finite");
+  EXPECT_EQ(f.unobservable().cols(), 0);
 }
 
 }  // namespace

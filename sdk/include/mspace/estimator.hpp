@@ -50,6 +50,16 @@ class Estimator : public PluginObject {
   virtual Eigen::MatrixXd cross(const std::vector<int>& rows, const std::vector<int>& cols) const = 0;
   /// Removes the given indices (features dropped from the map); later indices shift down.
   virtual void remove(std::vector<int> idx) = 0;
+  /// The directions of the robot block (k × u, one column each) along which
+  /// the state is unobservable: a global rigid motion of robot and map, e.g.
+  /// translation along x and y and rotation about the map's z axis, evaluated
+  /// at the current pose. The kernel calls it right after reset(). Estimators
+  /// that constrain their updates to leave these directions uninformed (the
+  /// observability-constrained EKF of Huang, Mourikis & Roumeliotis,
+  /// "Observability-based rules for designing consistent EKF SLAM
+  /// estimators", IJRR 2010) carry them through predict, augment and remove;
+  /// the others ignore them.
+  virtual void set_unobservable(const Eigen::MatrixXd& /*U_r*/) {}
 };
 
 }  // namespace mspace
