@@ -4,6 +4,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <numeric>
 
 namespace mspace::scan_matching {
@@ -137,7 +138,7 @@ MatchResult ReferenceScan::match(const ScanPoints& current, const Eigen::Vector3
   for (int it = 0; it < options_.max_iterations; ++it) {
     const double max_distance = correspondence_distance(options_, it);
     const Eigen::Matrix2d R = rotation(T[2]);
-    const Eigen::Matrix2d dR = rotation(T[2] + M_PI_2);  // ∂R/∂θ
+    const Eigen::Matrix2d dR = rotation(T[2] + 0.5 * std::numbers::pi);  // ∂R/∂θ
     Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     double weighted_r2 = 0.0, weight_sum = 0.0;
