@@ -45,7 +45,8 @@ void compact_lower(Eigen::MatrixXd& m, const std::vector<int>& keep) {
 
 }  // namespace
 
-CekfFilter::CekfFilter(int max_active, int keep_steps) : max_active_(max_active), keep_steps_(keep_steps) {
+CekfFilter::CekfFilter(int max_active, int keep_steps, bool observability_constrained)
+    : max_active_(max_active), keep_steps_(keep_steps), constrained_(observability_constrained) {
   if (max_active < 1) {
     throw std::invalid_argument("cekf: max_active must be at least 1, got " + std::to_string(max_active));
   }
@@ -76,6 +77,11 @@ void CekfFilter::reset(const Eigen::MatrixXd& P_rr) {
   gt_ = Eigen::MatrixXd::Zero(cap, kInitialCapacity);
   p0_ = Eigen::MatrixXd::Zero(cap, cap);
   paa_.topLeftCorner(k_, k_).triangularView<Eigen::Lower>() = P_rr;
+  if (constrained_) U_.reset(k_);
+}
+
+void CekfFilter::set_unobservable(const Eigen::MatrixXd& U_r) {
+  if (constrained_) U_.set_robot_rows(U_r, "cekf set_unobservable");
 }
 
 void CekfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {
@@ -92,6 +98,9 @@ void CekfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) 
   // eq. 27 against B: C_rB = Φ_r G becomes J_rr Φ_r G, so Φ_r ← J_rr Φ_r.
   auto phi_r = phi_.topLeftCorner(k_, n0_);
   phi_r = J_rr * phi_r;
+
+  // The unobservable directions move with the robot block: U_r ← J_rr U_r.
+  if (constrained_) U_.predict(J_rr);
 }
 
 // All observations of the step as one measurement η ≈ H δx[I] (eqs. 28–32),
@@ -103,7 +112,13 @@ void CekfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) 
 //     P_AA ← P_AA − W Wᵀ
 //     P_AB ← P_AB − K_A H P_AB = (Φ − W Vᵀ) G             ⇒ Φ ← Φ − W Vᵀ
 //     P_BB ← P_BB − Gᵀ Φᵀ Hᵀ S⁻¹ H Φ G = P⁰_BB − Gᵀ (Ψ + V Vᵀ) G  ⇒ Ψ ← Ψ + V Vᵀ.
+// In constrained mode every H is first made to annihilate U (see ekf_filter.hpp).
 Eigen::VectorXd CekfFilter::update(const std::vector<LinearizedObservation>& obs) {
+  if (constrained_ && U_.directions() > 0) return apply_update(U_.constrain(obs, "cekf update"));
+  return apply_update(obs);
+}
+
+Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation>& obs) {
   const support::StackedObservation s = support::stack_observations(obs, n_, "cekf update");
   Eigen::VectorXd dx = Eigen::VectorXd::Zero(n_);
   if (s.eta.size() == 0) return dx;
@@ -166,6 +181,7 @@ int CekfFilter::augment(const StateAugmentation& aug) {
   paa_.block(na_, 0, added, na_) = C_new_A;
   paa_.block(na_, na_, added, added).triangularView<Eigen::Lower>() = C_new_new;
   phi_.block(na_, 0, added, n0_) = phi_new;
+  if (constrained_) U_.augment(aug);
   for (int r = 0; r < added; ++r) {
     slot_.push_back(ns_ + r);
     active_.push_back(na_ + r);
@@ -259,8 +275,10 @@ void CekfFilter::remove(std::vector<int> idx) {
   memo_.clear();
 
   std::size_t w = 0;
+  std::vector<int> kept_rows;
   for (std::size_t i = 0; i < gone.size(); ++i) {
     if (gone[i]) continue;
+    kept_rows.push_back(static_cast<int>(i));
     slot_[w] = slot_[i];
     active_[w] = active_[i] >= 0 ? new_position[static_cast<std::size_t>(active_[i])] : -1;
     touched_[w] = touched_[i];
@@ -270,6 +288,7 @@ void CekfFilter::remove(std::vector<int> idx) {
   active_.resize(w);
   touched_.resize(w);
   n_ = static_cast<int>(w);
+  if (constrained_) U_.keep_rows(kept_rows);
 }
 
 // The global update: (I) written out, then a new partition with Φ = I, Ψ = 0.

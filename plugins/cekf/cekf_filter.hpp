@@ -39,6 +39,15 @@
 // currently active are stale and never read. G is kept transposed (slots ×
 // basis) so that the basis grows by appending a column.
 //
+// Observability-constrained mode (optional; Huang, Mourikis & Roumeliotis,
+// IJRR 2010), as in plugins/ekf (see ekf_filter.hpp): the unobservable
+// directions U (dim() × u) are a plain per-row matrix, independent of the
+// partition into A and B, so they are carried beside it (predict() maps the
+// robot rows, augment() appends J U[idx], remove() drops rows) and every
+// observation's Jacobian is projected (J ← J − J U_i (U_iᵀ U_i)⁺ U_iᵀ) before
+// the update sees it. Off by default; off, or before set_unobservable(), the
+// filter is the plain CEKF bit for bit.
+//
 // Errors: as plugins/ekf (see ekf_filter.hpp), with "cekf" in place of "ekf",
 // e.g. "cekf update: observation 2: J row 1 is not finite"; all thrown before
 // the covariance changes. An update whose S is not positive definite may
@@ -52,6 +61,7 @@
 #include <vector>
 
 #include "mspace/estimator.hpp"
+#include "mspace/estimator_support.hpp"
 
 namespace mspace::cekf {
 
@@ -62,8 +72,9 @@ class CekfFilter final : public Estimator {
 
   /// `max_active` (≥ 1): active rows or basis rows that trigger a global update.
   /// `keep_steps` (≥ 0): a row touched within this many updates stays active
-  /// across a global update.
-  explicit CekfFilter(int max_active = kDefaultMaxActive, int keep_steps = kDefaultKeepSteps);
+  /// across a global update. `observability_constrained`: the mode described above.
+  explicit CekfFilter(int max_active = kDefaultMaxActive, int keep_steps = kDefaultKeepSteps,
+                      bool observability_constrained = false);
 
   void reset(const Eigen::MatrixXd& P_rr) override;
   int dim() const override { return n_; }
@@ -73,6 +84,10 @@ class CekfFilter final : public Estimator {
   Eigen::MatrixXd marginal(const std::vector<int>& idx) const override;
   Eigen::MatrixXd cross(const std::vector<int>& rows, const std::vector<int>& cols) const override;
   void remove(std::vector<int> idx) override;
+  /// Observability-constrained mode only (ignored otherwise): replaces the
+  /// robot's rows of U by U_r (robot_dim() × u). Feature rows keep their
+  /// propagated values when u is unchanged and start at zero otherwise.
+  void set_unobservable(const Eigen::MatrixXd& U_r) override;
 
   /// The global update: brings P_AB and P_BB up to date and re-partitions.
   void flush();
@@ -88,8 +103,14 @@ class CekfFilter final : public Estimator {
   bool is_active(int i) const { return active_.at(static_cast<std::size_t>(i)) >= 0; }
   /// Global updates done since reset() (flush() calls included).
   std::int64_t global_updates() const { return global_updates_; }
+  bool observability_constrained() const { return constrained_; }
+  /// The unobservable directions U (dim() × u) in observability-constrained
+  /// mode; 0 × 0 otherwise.
+  const Eigen::MatrixXd& unobservable() const { return U_.matrix(); }
 
  private:
+  /// eqs. 28–32 for the given (possibly constrained) observations.
+  Eigen::VectorXd apply_update(const std::vector<LinearizedObservation>& obs);
   /// P_AA(a, b) from the lower triangle (active positions).
   double paa(int a, int b) const { return a >= b ? paa_(a, b) : paa_(b, a); }
   /// P⁰(s, t) from the lower triangle (slots).
@@ -137,6 +158,8 @@ class CekfFilter final : public Estimator {
 
   int max_active_;
   int keep_steps_;
+  bool constrained_;                             ///< observability-constrained mode
+  estimator_support::UnobservableDirections U_;  ///< dim() × u (constrained mode only)
 
   int k_ = 0;   ///< robot pose dimension (rows 0..k−1, always active at positions 0..k−1)
   int n_ = 0;   ///< state dimension

@@ -11,7 +11,7 @@ using mspace::cekf::CekfFilter;
 std::unique_ptr<mspace::PluginObject> make_cekf(const mspace::PluginArgs& args) {
   const auto max_active = static_cast<int>(args.params.get_int("max_active"));
   const auto keep_steps = static_cast<int>(args.params.get_int("keep_steps"));
-  return std::make_unique<CekfFilter>(max_active, keep_steps);
+  return std::make_unique<CekfFilter>(max_active, keep_steps, args.params.get_bool("observability_constrained"));
 }
 
 mspace::PluginDescriptor describe() {
@@ -32,6 +32,11 @@ mspace::PluginDescriptor describe() {
                         "rows touched within this many updates stay active across a global "
                         "update (at most max_active/2 rows)",
                         0, 1'000'000),
+      mspace::param_bool("observability_constrained", false,
+                         "observability-constrained EKF (Huang, Mourikis & Roumeliotis, IJRR 2010), as "
+                         "in ekf: carry the unobservable global motion of robot and map through every "
+                         "step and project it out of each observation's Jacobian, so no update "
+                         "informs it"),
   };
   d.factory = &make_cekf;
   return d;

@@ -15,26 +15,6 @@ using Eigen::Index;
 using estimator_support::require_indices;
 using estimator_support::size_text;
 
-namespace {
-
-/// The nearest J' to J (row by row) with J' U = 0: each row loses its
-/// component in the column space of U, J' = J − J U (Uᵀ U)⁺ Uᵀ (the
-/// observability constraint of Huang, Mourikis & Roumeliotis, IJRR 2010).
-/// The pseudo-inverse copes with a U of deficient rank (e.g. a one-row U).
-Eigen::MatrixXd annihilating(const Eigen::MatrixXd& J, const Eigen::MatrixXd& U) {
-  const Eigen::MatrixXd G = (U.transpose() * U).completeOrthogonalDecomposition().pseudoInverse();
-  return J - J * U * G * U.transpose();
-}
-
-/// Appends `rows` below `m` (same number of columns).
-void append_rows(Eigen::MatrixXd& m, const Eigen::MatrixXd& rows) {
-  const Eigen::Index old = m.rows();
-  m.conservativeResize(old + rows.rows(), Eigen::NoChange);
-  m.bottomRows(rows.rows()) = rows;
-}
-
-}  // namespace
-
 EkfFilter::EkfFilter(int initial_capacity, bool observability_constrained)
     : initial_capacity_(initial_capacity), constrained_(observability_constrained) {
   if (initial_capacity < 1) {
@@ -49,16 +29,11 @@ void EkfFilter::reset(const Eigen::MatrixXd& P_rr) {
   n_ = k_;
   store_.resize(std::max(k_, initial_capacity_), std::max(k_, initial_capacity_));
   store_.topLeftCorner(k_, k_).triangularView<Eigen::Lower>() = P_rr;
-  if (constrained_) U_ = Eigen::MatrixXd::Zero(k_, 0);
+  if (constrained_) U_.reset(k_);
 }
 
 void EkfFilter::set_unobservable(const Eigen::MatrixXd& U_r) {
-  if (!constrained_) return;
-  const std::string context = "ekf set_unobservable";
-  estimator_support::require_size(U_r, k_, U_r.cols(), context, "U_r");
-  estimator_support::require_finite(U_r, context, "U_r");
-  if (U_.cols() != U_r.cols()) U_ = Eigen::MatrixXd::Zero(n_, U_r.cols());
-  U_.topRows(k_) = U_r;
+  if (constrained_) U_.set_robot_rows(U_r, "ekf set_unobservable");
 }
 
 void EkfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {
@@ -74,23 +49,12 @@ void EkfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {
   C_pr = C_pr * J_rr.transpose();
 
   // The unobservable directions move with the robot block: U_r ← J_rr U_r.
-  if (constrained_) U_.topRows(k_) = (J_rr * U_.topRows(k_)).eval();
+  if (constrained_) U_.predict(J_rr);
 }
 
 Eigen::VectorXd EkfFilter::update(const std::vector<LinearizedObservation>& obs) {
-  if (constrained_ && U_.cols() > 0) return apply_update(constrained_observations(obs));
+  if (constrained_ && U_.directions() > 0) return apply_update(U_.constrain(obs, "ekf update"));
   return apply_update(obs);
-}
-
-std::vector<LinearizedObservation> EkfFilter::constrained_observations(
-    const std::vector<LinearizedObservation>& obs) const {
-  std::vector<LinearizedObservation> out = obs;
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    // Checked here already because U[idx] needs valid indices.
-    estimator_support::validate_observation(out[i], n_, "ekf update: observation " + std::to_string(i));
-    out[i].J = annihilating(out[i].J, U_(out[i].idx, Eigen::all));
-  }
-  return out;
 }
 
 Eigen::VectorXd EkfFilter::apply_update(const std::vector<LinearizedObservation>& obs) {
@@ -138,7 +102,7 @@ int EkfFilter::augment(const StateAugmentation& aug) {
   const Eigen::MatrixXd C_new_new = C_new_all(Eigen::all, aug.idx) * aug.J.transpose() + aug.C_new;
   store_.block(n_, 0, added, n_) = C_new_all;
   store_.block(n_, n_, added, added).triangularView<Eigen::Lower>() = C_new_new;
-  if (constrained_) append_rows(U_, aug.J * U_(aug.idx, Eigen::all));
+  if (constrained_) U_.augment(aug);
   n_ += added;
   return first;
 }
@@ -176,7 +140,7 @@ void EkfFilter::remove(std::vector<int> idx) {
   for (int b = 0; b < kept; ++b) {
     for (int a = b; a < kept; ++a) store_(a, b) = store_(keep[a], keep[b]);
   }
-  if (constrained_) U_ = U_(keep, Eigen::all).eval();
+  if (constrained_) U_.keep_rows(keep);
   n_ = kept;
 }
 

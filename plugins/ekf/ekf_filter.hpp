@@ -43,6 +43,7 @@
 #include <vector>
 
 #include "mspace/estimator.hpp"
+#include "mspace/estimator_support.hpp"
 
 namespace mspace::ekf {
 
@@ -76,7 +77,7 @@ class EkfFilter final : public Estimator {
   bool observability_constrained() const { return constrained_; }
   /// The unobservable directions U (dim() × u) in observability-constrained
   /// mode; 0 × 0 otherwise.
-  const Eigen::MatrixXd& unobservable() const { return U_; }
+  const Eigen::MatrixXd& unobservable() const { return U_.matrix(); }
 
  private:
   /// C_state(i, j) read from the lower triangle.
@@ -85,12 +86,10 @@ class EkfFilter final : public Estimator {
   Eigen::MatrixXd gather_columns(const std::vector<int>& cols) const;
   /// eqs. 28–32 for the given (possibly constrained) observations.
   Eigen::VectorXd apply_update(const std::vector<LinearizedObservation>& obs);
-  /// The observations with every J made to annihilate U[idx] (constrained mode).
-  std::vector<LinearizedObservation> constrained_observations(const std::vector<LinearizedObservation>& obs) const;
 
   int initial_capacity_;
   bool constrained_;       ///< observability-constrained mode
-  Eigen::MatrixXd U_;      ///< dim() × u unobservable directions (constrained mode only)
+  estimator_support::UnobservableDirections U_;  ///< dim() × u (constrained mode only)
   int k_ = 0;              ///< robot pose dimension
   int n_ = 0;              ///< state dimension
   Eigen::MatrixXd store_;  ///< capacity × capacity; lower triangle of [0,n_)² is C_state

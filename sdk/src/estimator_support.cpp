@@ -1,6 +1,7 @@
 // estimator_support.cpp — input checks and observation stacking of the estimators.
 #include "mspace/estimator_support.hpp"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <stdexcept>
 
@@ -88,6 +89,52 @@ void validate_removal(const std::vector<int>& idx, int n, int k, const std::stri
     }
   }
 }
+
+// ---------------------------------------------------------------- observability constraint
+
+void UnobservableDirections::reset(int k) {
+  k_ = k;
+  U_ = Eigen::MatrixXd::Zero(k, 0);
+}
+
+void UnobservableDirections::set_robot_rows(const Eigen::MatrixXd& U_r, const std::string& context) {
+  require_size(U_r, k_, U_r.cols(), context, "U_r");
+  require_finite(U_r, context, "U_r");
+  if (U_.cols() != U_r.cols()) U_ = Eigen::MatrixXd::Zero(U_.rows(), U_r.cols());
+  U_.topRows(k_) = U_r;
+}
+
+void UnobservableDirections::predict(const Eigen::MatrixXd& J_rr) {
+  U_.topRows(k_) = (J_rr * U_.topRows(k_)).eval();
+}
+
+void UnobservableDirections::augment(const StateAugmentation& aug) {
+  const Eigen::MatrixXd rows = aug.J * U_(aug.idx, Eigen::all);
+  const Index old = U_.rows();
+  U_.conservativeResize(old + rows.rows(), Eigen::NoChange);
+  U_.bottomRows(rows.rows()) = rows;
+}
+
+void UnobservableDirections::keep_rows(const std::vector<int>& keep) { U_ = U_(keep, Eigen::all).eval(); }
+
+std::vector<LinearizedObservation> UnobservableDirections::constrain(const std::vector<LinearizedObservation>& obs,
+                                                                     const std::string& context) const {
+  std::vector<LinearizedObservation> out = obs;
+  if (U_.cols() == 0) return out;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    // Checked here already because U[idx] needs valid indices.
+    validate_observation(out[i], static_cast<int>(U_.rows()), context + ": observation " + std::to_string(i));
+    out[i].J = annihilating(out[i].J, U_(out[i].idx, Eigen::all));
+  }
+  return out;
+}
+
+Eigen::MatrixXd annihilating(const Eigen::MatrixXd& J, const Eigen::MatrixXd& U) {
+  const Eigen::MatrixXd G = (U.transpose() * U).completeOrthogonalDecomposition().pseudoInverse();
+  return J - J * U * G * U.transpose();
+}
+
+// ---------------------------------------------------------------- stacking
 
 namespace {
 

@@ -3,7 +3,9 @@
 // update, augment, remove, marginal and cross, it must give the same δx and
 // the same covariance to round-off at every step — across activations of
 // passive rows and global updates — and reject bad input exactly as the EKF
-// does (with "cekf" in the messages).
+// does (with "cekf" in the messages). The same holds with the
+// observability-constrained option on in both filters; off, the option changes
+// nothing, bit for bit.
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -64,6 +66,21 @@ void expect_throw_message(const std::function<void()>& call, const std::string& 
   }
 }
 
+/// Global planar motion of a robot (x, y, θ) at (x, y): translation along x,
+/// along y, rotation about the origin (the kernel's U_r for a planar robot).
+MatrixXd global_motion(double x, double y) { return MatrixXd{{1, 0, -y}, {0, 1, x}, {0, 0, 1}}; }
+
+/// The observability-constrained option of both filters, and whether they are
+/// given the robot's unobservable directions after reset (as the kernel does).
+enum class Constraint {
+  Off,                 ///< option off, no directions
+  OffGivenDirections,  ///< option off, set_unobservable() called (ignored)
+  OnWithoutDirections, ///< option on, set_unobservable() never called
+  On,                  ///< option on with global_motion(0.7, −1.2)
+};
+
+bool option_on(Constraint c) { return c == Constraint::OnWithoutDirections || c == Constraint::On; }
+
 /// The EKF and the CEKF fed the same calls; every result is compared.
 /// `features` lists the state rows of each feature (renumbered on removal).
 struct Twin {
@@ -73,11 +90,17 @@ struct Twin {
   std::mt19937 rng;
   double worst = 0.0;     ///< largest relative difference seen
   int passive_steps = 0;  ///< steps that started with at least one passive row
+  VectorXd last_dx;       ///< the CEKF's δx of the latest update
 
-  Twin(int max_active, int keep_steps, unsigned seed) : cekf(max_active, keep_steps), rng(seed) {
+  Twin(int max_active, int keep_steps, unsigned seed, Constraint constraint = Constraint::Off)
+      : ekf(64, option_on(constraint)), cekf(max_active, keep_steps, option_on(constraint)), rng(seed) {
     const MatrixXd P_rr = random_spd(kRobotDim, 0.5, rng);
     ekf.reset(P_rr);
     cekf.reset(P_rr);
+    if (constraint == Constraint::OffGivenDirections || constraint == Constraint::On) {
+      ekf.set_unobservable(global_motion(0.7, -1.2));
+      cekf.set_unobservable(global_motion(0.7, -1.2));
+    }
   }
 
   void record(double error) {
@@ -137,7 +160,8 @@ struct Twin {
       o.C_eta = random_spd(m, 0.1, rng);
       obs.push_back(o);
     }
-    record(relative_error(cekf.update(obs), ekf.update(obs)));
+    last_dx = cekf.update(obs);
+    record(relative_error(last_dx, ekf.update(obs)));
   }
 
   /// Drops a random feature; the rows after it shift down.
@@ -197,6 +221,8 @@ struct Twin {
       cekf.flush();
     }
     EXPECT_EQ(cekf.dim(), ekf.dim());
+    // U is carried by the same shared code in both: equal bit for bit.
+    EXPECT_TRUE(cekf.unobservable() == ekf.unobservable());
     compare_covariance();
   }
 };
@@ -225,6 +251,23 @@ TEST_P(CekfSequence, AgreesWithTheEkfAtEveryStep) {
   // The sequence really exercised the compressed form.
   EXPECT_GT(twin.cekf.global_updates(), 0);
   EXPECT_GT(twin.passive_steps, c.steps / 4);
+}
+
+TEST_P(CekfSequence, ObservabilityConstrainedAgreesWithTheConstrainedEkfAtEveryStep) {
+  const SequenceCase c = GetParam();
+  Twin twin(c.max_active, c.keep_steps, c.seed, Constraint::On);
+  for (int s = 0; s < c.steps; ++s) {
+    twin.step(c.target_dim);
+    if (HasFailure()) FAIL() << "first disagreement at step " << s;
+  }
+  EXPECT_LE(twin.worst, kRelTol);
+  EXPECT_GT(twin.cekf.global_updates(), 0);
+  EXPECT_GT(twin.passive_steps, c.steps / 4);
+  // The directions were carried over every row: 3 of them, the robot rows
+  // moved by the predictions (no longer the initial global motion).
+  ASSERT_EQ(twin.cekf.unobservable().rows(), twin.cekf.dim());
+  ASSERT_EQ(twin.cekf.unobservable().cols(), 3);
+  EXPECT_GT((twin.cekf.unobservable().topRows(kRobotDim) - global_motion(0.7, -1.2)).cwiseAbs().maxCoeff(), 0.1);
 }
 
 INSTANTIATE_TEST_SUITE_P(Sizes, CekfSequence,
@@ -509,6 +552,88 @@ TEST(CekfInput, InnovationCovarianceNotPositiveDefiniteIsAnError) {
   // Row 4 may have been activated, which changes the representation only.
   EXPECT_LE(relative_error(map.cekf.covariance(), before), 1e-14);
   EXPECT_LE(relative_error(map.cekf.covariance(), map.ekf.covariance()), kRelTol);
+}
+
+// ---------------------------------------------------------------------------
+// Observability-constrained mode (Huang, Mourikis & Roumeliotis, IJRR 2010).
+
+TEST(CekfObservabilityConstrained, OffOrWithoutDirectionsIsThePlainFilterBitForBit) {
+  // Lockstep random sequences (same seed, same calls) across global updates.
+  Twin plain(12, 2, 9), off(12, 2, 9, Constraint::OffGivenDirections);
+  Twin without(12, 2, 9, Constraint::OnWithoutDirections), on(12, 2, 9, Constraint::On);
+  for (int s = 0; s < 300; ++s) {
+    for (Twin* t : {&plain, &off, &without, &on}) t->step(50);
+    ASSERT_TRUE(off.last_dx == plain.last_dx) << s;
+    ASSERT_TRUE(without.last_dx == plain.last_dx) << s;
+  }
+  EXPECT_TRUE(off.cekf.covariance() == plain.cekf.covariance());
+  EXPECT_TRUE(without.cekf.covariance() == plain.cekf.covariance());
+  EXPECT_GT(plain.cekf.global_updates(), 0);
+  EXPECT_FALSE(off.cekf.observability_constrained());
+  EXPECT_EQ(off.cekf.unobservable().size(), 0);
+  EXPECT_TRUE(without.cekf.observability_constrained());
+  EXPECT_EQ(without.cekf.unobservable().rows(), without.cekf.dim());
+  EXPECT_EQ(without.cekf.unobservable().cols(), 0);
+  // With directions the option does change the estimate.
+  EXPECT_GT(relative_error(on.cekf.covariance(), plain.cekf.covariance()), 1e-3);
+}
+
+/// A constrained (or plain) CEKF with five 3-row features, all passive.
+CekfFilter passive_map_with_directions(bool constrained) {
+  CekfFilter cekf(1000, 0, constrained);
+  std::mt19937 rng(41);
+  cekf.reset(random_spd(kRobotDim, 0.5, rng));
+  cekf.set_unobservable(global_motion(0.7, -1.2));
+  for (int f = 0; f < 5; ++f)
+    cekf.augment(StateAugmentation{{0, 1, 2}, random_matrix(3, 3, rng), random_spd(3, 0.2, rng)});
+  cekf.flush();
+  return cekf;
+}
+
+TEST(CekfObservabilityConstrained, JacobianAlongTheDirectionsOfPassiveRowsChangesNothing) {
+  CekfFilter cekf = passive_map_with_directions(true);
+  CekfFilter plain = passive_map_with_directions(false);
+  const std::vector<int> idx = {0, 1, 2, 9, 10, 11};
+  ASSERT_FALSE(cekf.is_active(9));
+  // Every row of J a combination of the columns of U[idx]: J lies in the
+  // unobservable directions, so the projected J is zero (to round-off).
+  const MatrixXd Ui = cekf.unobservable()(idx, Eigen::all);
+  LinearizedObservation o;
+  o.idx = idx;
+  o.J = MatrixXd{{1.0, -2.0, 0.5}, {0.3, 0.0, 4.0}} * Ui.transpose();
+  o.eta = VectorXd{{0.3, -0.2}};
+  o.C_eta = MatrixXd{{0.05, 0.01}, {0.01, 0.04}};
+  const MatrixXd before = cekf.covariance();
+  ASSERT_EQ(relative_error(before, plain.covariance()), 0.0);
+  const VectorXd dx = cekf.update({o});
+  const VectorXd dx_plain = plain.update({o});
+  // The plain filter takes it as real information.
+  EXPECT_GT(dx_plain.cwiseAbs().maxCoeff(), 1e-2);
+  EXPECT_GT((plain.covariance() - before).cwiseAbs().maxCoeff(), 1e-2);
+  // The constrained one moves by round-off only: the projected J is ε‖J‖,
+  // so δx is at most about ε‖J‖ ‖C‖ ‖C_η⁻¹ η‖ (and δC far less).
+  const double scale = o.J.cwiseAbs().maxCoeff() * before.cwiseAbs().maxCoeff() *
+                       o.C_eta.inverse().cwiseAbs().rowwise().sum().maxCoeff() * o.eta.cwiseAbs().maxCoeff();
+  EXPECT_LT(dx.cwiseAbs().maxCoeff(), 1e-13 * scale);
+  EXPECT_LT((cekf.covariance() - before).cwiseAbs().maxCoeff(), 1e-13 * scale);
+  EXPECT_TRUE(cekf.is_active(9));  // activated all the same
+}
+
+TEST(CekfObservabilityConstrained, DirectionsAreChecked) {
+  CekfFilter f(8, 2, true);
+  f.reset(MatrixXd::Identity(3, 3));
+  expect_throw_message<std::invalid_argument>([&] { f.set_unobservable(MatrixXd::Ones(2, 3)); },
+                                              "cekf set_unobservable: U_r is 2 x 3, expected 3 x 3");
+  MatrixXd bad = global_motion(0.0, 0.0);
+  bad(1, 2) = std::numeric_limits<double>::quiet_NaN();
+  expect_throw_message<std::invalid_argument>([&] { f.set_unobservable(bad); },
+                                              "cekf set_unobservable: U_r row 1 is not finite");
+  EXPECT_EQ(f.unobservable().cols(), 0);
+  f.set_unobservable(global_motion(1.0, 2.0));
+  LinearizedObservation o = good_observation();
+  o.idx = {0, 3};
+  expect_throw_message<std::invalid_argument>([&] { f.update({o}); },
+                                              "cekf update: observation 0: index 3 is out of range [0, 3)");
 }
 
 }  // namespace

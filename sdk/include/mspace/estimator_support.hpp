@@ -43,6 +43,50 @@ void validate_prediction(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q, 
 /// Indices of a removal: in [0, n), distinct, none of them a robot row (< k).
 void validate_removal(const std::vector<int>& idx, int n, int k, const std::string& context);
 
+/// The unobservable directions U (dim × u, one column per direction) of an
+/// observability-constrained filter (Huang, Mourikis & Roumeliotis,
+/// "Observability-based rules for designing consistent EKF SLAM estimators",
+/// IJRR 2010), carried row for row with the state perturbation (T-RO 2007
+/// eq. 23): the robot rows move with the prediction, new rows come with an
+/// augmentation, removed rows go. constrain() then makes every observation's
+/// Jacobian annihilate U, so no update informs the unobservable directions.
+/// Shared by the ekf and cekf plugins; U does not depend on how a filter
+/// stores its covariance.
+class UnobservableDirections {
+ public:
+  /// k robot rows and no direction (u = 0): constrain() changes nothing.
+  void reset(int k);
+  /// Replaces the robot rows by U_r (k × u, finite; throws naming `context`
+  /// as the checks above do). The other rows keep their values when u is
+  /// unchanged and start at zero otherwise.
+  void set_robot_rows(const Eigen::MatrixXd& U_r, const std::string& context);
+  /// U_r ← J_rr U_r (J_rr of eq. 26, already checked by the caller).
+  void predict(const Eigen::MatrixXd& J_rr);
+  /// Appends the rows aug.J U[aug.idx] of the new state rows (aug checked by the caller).
+  void augment(const StateAugmentation& aug);
+  /// Keeps the rows `keep` (ascending), in that order.
+  void keep_rows(const std::vector<int>& keep);
+  /// The observations with every J replaced by J − J U_i (U_iᵀ U_i)⁺ U_iᵀ,
+  /// U_i = U[idx] (see annihilating()). Each observation is validated first
+  /// against the state dimension (context "<context>: observation <i>").
+  /// With u = 0 they come back unchanged.
+  std::vector<LinearizedObservation> constrain(const std::vector<LinearizedObservation>& obs,
+                                               const std::string& context) const;
+  /// U (dim × u).
+  const Eigen::MatrixXd& matrix() const { return U_; }
+  /// u.
+  Eigen::Index directions() const { return U_.cols(); }
+
+ private:
+  int k_ = 0;
+  Eigen::MatrixXd U_;
+};
+
+/// The nearest J' to J (row by row) with J' U = 0: each row loses its
+/// component in the column space of U, J' = J − J U (Uᵀ U)⁺ Uᵀ. The
+/// pseudo-inverse copes with a U of deficient rank (e.g. a one-row U).
+Eigen::MatrixXd annihilating(const Eigen::MatrixXd& J, const Eigen::MatrixXd& U);
+
 /// All observations of one step as one measurement over the union I of their
 /// state indices: η = J_I δx[I] + noise with block-diagonal C_eta.
 struct StackedObservation {
