@@ -1,6 +1,7 @@
 // ceiling_renderer.cpp — see ceiling_renderer.hpp.
 #include "ceiling_renderer.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -168,8 +169,13 @@ CeilingRenderer::CeilingRenderer(const CeilingWorld& world, const RenderSettings
   const camera::CameraModel& c = settings_.camera;
   const int n = settings_.supersampling;
   rays_.reserve(static_cast<std::size_t>(c.width * c.height * n * n));
+  pixel_factor_.reserve(static_cast<std::size_t>(c.width * c.height));
+  const double corner2 = std::max({c.cx * c.cx, (c.width - 1 - c.cx) * (c.width - 1 - c.cx)}) +
+                         std::max({c.cy * c.cy, (c.height - 1 - c.cy) * (c.height - 1 - c.cy)});
   for (int v = 0; v < c.height; ++v) {
     for (int u = 0; u < c.width; ++u) {
+      const double r2 = (u - c.cx) * (u - c.cx) + (v - c.cy) * (v - c.cy);
+      pixel_factor_.push_back(settings_.gain * (1.0 - settings_.vignetting * r2 / corner2));
       for (int sy = 0; sy < n; ++sy) {
         for (int sx = 0; sx < n; ++sx) {
           // Sub-pixel sample of the distorted image; pixel centres are integers.
@@ -195,7 +201,9 @@ GreyImage CeilingRenderer::render(const Pose6& robot_pose, std::uint64_t frame) 
     for (int u = 0; u < c.width; ++u) {
       double sum = 0.0;
       for (int s = 0; s < n2; ++s, ++ray) sum += world_.radiance(origin, R * *ray);
-      image(v, u) = static_cast<float>(sum / n2);
+      const double factor = pixel_factor_[static_cast<std::size_t>(v) * static_cast<std::size_t>(c.width) +
+                                          static_cast<std::size_t>(u)];
+      image(v, u) = static_cast<float>(factor * (sum / n2) + settings_.offset);
     }
   }
   if (settings_.blur_sigma > 0.0) {
@@ -217,7 +225,7 @@ GreyImage CeilingRenderer::render(const Pose6& robot_pose, std::uint64_t frame) 
 SequenceSummary write_sequence(const SequenceSettings& s, const std::string& folder) {
   const fs::path dir(folder);
   fs::create_directories(dir / "images");
-  const CeilingWorld world(s.seed);
+  const CeilingWorld world(s.seed, s.appearance);
   const CeilingRenderer renderer(world, s.render, s.seed);
   const sim_world::Trajectory trajectory = sim_world::drive_route(
       CeilingWorld::route_waypoints(), {1, s.speed, s.dt, s.max_turn_rate});

@@ -5,8 +5,12 @@
 //
 // Image formation, per pixel: supersampling² rays through sub-pixel positions
 // of the *distorted* image (each undistorted with the camera model, so the
-// lens distortion is exact), averaged; then a Gaussian blur (the lens) and
-// Gaussian noise (the sensor), rounded to 8-bit grey. The noise of frame k
+// lens distortion is exact), averaged; times the vignetting falloff and the
+// exposure gain, plus the offset; then a Gaussian blur (the lens) and Gaussian
+// noise (the sensor), rounded and saturated to 8-bit grey. The defaults
+// (gain 1, offset 0, no vignetting) give the images of the first renderer
+// bit for bit; the other settings give the variety other cameras show
+// (auto exposure, dark corners, noisier sensors) for the extractors' tests. The noise of frame k
 // comes from its own random stream, so a frame does not depend on which
 // frames were rendered before it. Everything is deterministic for a seed.
 //
@@ -49,6 +53,11 @@ struct RenderSettings {
   int supersampling = 2;       ///< rays per pixel along each axis
   double blur_sigma = 0.7;     ///< Gaussian blur, pixels (0: none)
   double noise_sigma = 2.0;    ///< Gaussian pixel noise, grey levels (0: none)
+  double gain = 1.0;           ///< exposure: radiance × gain …
+  double offset = 0.0;         ///< … + offset (grey levels), before noise and saturation
+  /// Vignetting: radiance × (1 − vignetting · (r / r_corner)²), r the pixel's
+  /// distance from the principal point (0: none; 0.4: corners 40 % darker).
+  double vignetting = 0.0;
 };
 
 /// The default camera: 320×240, f = 260 px, mild barrel distortion, mounted
@@ -71,6 +80,7 @@ class CeilingRenderer {
   RenderSettings settings_;
   std::uint64_t seed_;
   std::vector<Eigen::Vector3d> rays_;  ///< camera-frame ray of every sub-pixel sample
+  std::vector<double> pixel_factor_;   ///< gain × vignetting falloff of every pixel
 };
 
 /// The optional planar laser scanner (for a fused laser + camera run): one
@@ -88,6 +98,7 @@ struct LaserSettings {
 struct SequenceSettings {
   std::uint64_t seed = 1;
   RenderSettings render{default_camera()};
+  Appearance appearance;        ///< grey levels and lamp size of the world
   double speed = 0.4;           ///< m/s
   double dt = 0.1;              ///< s between frames (10 Hz)
   double max_turn_rate = 1.0;   ///< rad/s

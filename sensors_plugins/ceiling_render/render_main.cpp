@@ -24,7 +24,25 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--blur", settings.render.blur_sigma, "Gaussian blur std (pixels)")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--gain", settings.render.gain, "exposure gain (grey = gain * radiance + offset)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--offset", settings.render.offset, "exposure offset (grey levels)");
+  app.add_option("--vignetting", settings.render.vignetting,
+                 "corner darkening: 1 - v * (r / r_corner)^2 (0: none)")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--lamp-grey", settings.appearance.lamp_grey, "lamp radiance (grey levels)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--lamp-radius", settings.appearance.lamp_radius, "lamp disc radius (m)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--tile-darkening", settings.appearance.tile_line_darkening,
+                 "ceiling texture: grey-level drop of the tile grid lines")
+      ->check(CLI::NonNegativeNumber);
+  double distortion_scale = 1.0;
+  app.add_option("--distortion-scale", distortion_scale,
+                 "multiplies the default lens distortion coefficients (0: a pinhole camera)")
+      ->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
+  for (double& k : settings.render.camera.distortion) k *= distortion_scale;
   try {
     const auto summary = mspace::ceiling_render::write_sequence(settings, out);
     std::printf("%zu frames, %.1f m of path, written to %s\n", summary.frames,

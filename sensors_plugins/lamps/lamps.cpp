@@ -1,7 +1,10 @@
 // lamps.cpp — see lamps.hpp.
 #include "lamps.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <numbers>
 #include <opencv2/imgproc.hpp>
 
@@ -51,8 +54,144 @@ double positive(const Params& p, const char* name) {
 
 struct LampExtractor::Buffers {
   cv::Mat mask;
-  std::vector<std::vector<cv::Point>> contours;
+  cv::Mat1f grey, smooth;
+  cv::Mat local_mask;
+  std::vector<std::vector<cv::Point>> contours, local_contours;
+  std::vector<float> values;
+  std::vector<int> histogram;
 };
+
+namespace {
+
+/// The median of `values` (reordered).
+double median_of(std::vector<float>& values) {
+  if (values.empty()) return 0.0;
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
+
+/// The centre of the bin that holds the median of a histogram (bin units).
+double histogram_median(const std::vector<int>& histogram) {
+  std::int64_t total = 0;
+  for (int count : histogram) total += count;
+  std::int64_t seen = 0;
+  for (std::size_t b = 0; b < histogram.size(); ++b) {
+    seen += histogram[b];
+    if (2 * seen >= total) return static_cast<double>(b) + 0.5;
+  }
+  return 0.0;
+}
+
+/// For white noise of unit σ and G the separable Gaussian of `sigma` px: the
+/// σ of the residual I − G∗I, √(1 − 2 g₀ + Σ g²), and the σ of the smoothed
+/// image G∗I, √(Σ g²) — with g₀ the 2-D kernel's centre weight and Σ g² its
+/// sum of squares, both the squares of the 1-D kernel's.
+struct NoiseFactors {
+  double residual = 1.0;
+  double smoothed = 1.0;
+};
+NoiseFactors noise_factors(double sigma, int ksize) {
+  const cv::Mat k = cv::getGaussianKernel(ksize, sigma, CV_64F);
+  const double centre = k.at<double>(ksize / 2);
+  const double sum_sq = k.dot(k);
+  return {std::sqrt(1.0 - 2.0 * centre * centre + sum_sq * sum_sq), sum_sq};
+}
+
+/// Relative mode, first pass: smooths the image and estimates its noise,
+/// background and peak; false when nothing in the frame stands out enough to
+/// be a lamp.
+bool relative_statistics(LampExtractor::Buffers& k, const LampConfig& c, const camera::GreyView& image,
+                         LampExtractor::ImageStatistics& stats) {
+  camera::as_mat(image).convertTo(k.grey, CV_32F);
+  const int ksize = 2 * static_cast<int>(std::ceil(3.0 * c.smoothing_sigma)) + 1;
+  cv::GaussianBlur(k.grey, k.smooth, cv::Size(ksize, ksize), c.smoothing_sigma, c.smoothing_sigma,
+                   cv::BORDER_REPLICATE);
+  // Noise from the median absolute residual (1.4826·MAD is σ for a Gaussian);
+  // edges and texture are few pixels and do not move the median. Both medians
+  // are read off histograms (1/16 grey level bins): O(pixels), no sorting.
+  constexpr double kBinsPerGrey = 16.0;
+  constexpr int kResidualBins = 64 * 16;  // residuals up to 64 grey levels; larger ones land in the last bin
+  constexpr int kGreyBins = 256 * 16;
+  k.histogram.assign(kResidualBins, 0);
+  for (int v = 0; v < k.grey.rows; ++v) {
+    const float* g = k.grey.ptr<float>(v);
+    const float* s = k.smooth.ptr<float>(v);
+    for (int u = 0; u < k.grey.cols; ++u)
+      ++k.histogram[static_cast<std::size_t>(std::min(kResidualBins - 1, static_cast<int>(std::abs(g[u] - s[u]) * kBinsPerGrey)))];
+  }
+  const NoiseFactors factors = noise_factors(c.smoothing_sigma, ksize);
+  stats.noise_sigma = 1.4826 * histogram_median(k.histogram) / kBinsPerGrey / factors.residual;
+  // Peak and background are read off the smoothed image: its noise decides
+  // whether a peak stands out.
+  stats.smoothed_noise_sigma = stats.noise_sigma * factors.smoothed;
+  k.histogram.assign(kGreyBins, 0);
+  for (int v = 0; v < k.smooth.rows; ++v) {
+    const float* s = k.smooth.ptr<float>(v);
+    for (int u = 0; u < k.smooth.cols; ++u)
+      ++k.histogram[static_cast<std::size_t>(std::clamp(static_cast<int>(s[u] * kBinsPerGrey), 0, kGreyBins - 1))];
+  }
+  stats.background = histogram_median(k.histogram) / kBinsPerGrey;
+  double peak = 0.0;
+  cv::minMaxLoc(k.smooth, nullptr, &peak);
+  stats.peak = peak;
+  return stats.peak - stats.background >=
+         std::max(c.min_contrast_sigma * stats.smoothed_noise_sigma, c.min_contrast_grey);
+}
+
+/// Relative mode, second pass: the lamp around the candidate pixel `seed` at
+/// the half maximum of its own peak over its surroundings — the median of
+/// the smoothed image in a window around the candidate blob `box`, outside
+/// the pixels above that half maximum. The window grows until the lamp's
+/// contour lies inside it. False when the blob does not stand out of its
+/// surroundings by the configured contrast, or fails the shape tests.
+bool refine_locally(LampExtractor::Buffers& k, const LampConfig& c, double smoothed_noise_sigma,
+                    const cv::Point& seed, const cv::Rect& box, Eigen::Vector2d& centroid) {
+  const cv::Rect image_rect(0, 0, k.smooth.cols, k.smooth.rows);
+  int margin = std::max(4, std::max(box.width, box.height));
+  for (int attempt = 0; attempt < 4; ++attempt, margin *= 2) {
+    const cv::Rect window = (box + cv::Size(2 * margin, 2 * margin) - cv::Point(margin, margin)) & image_rect;
+    const cv::Mat1f patch = k.smooth(window);
+    const cv::Point inside = seed - window.tl();
+    const double peak = patch(inside);
+    // Surroundings: the median of the window outside the candidate's box.
+    k.values.clear();
+    for (int v = 0; v < patch.rows; ++v)
+      for (int u = 0; u < patch.cols; ++u)
+        if (!box.contains(cv::Point(u, v) + window.tl())) k.values.push_back(patch(v, u));
+    const double surroundings = median_of(k.values);
+    const double contrast = peak - surroundings;
+    if (contrast < std::max(c.min_contrast_sigma * smoothed_noise_sigma, c.min_contrast_grey)) return false;
+    cv::threshold(patch, k.local_mask, surroundings + 0.5 * contrast, 255, cv::THRESH_BINARY);
+    k.local_mask.convertTo(k.local_mask, CV_8U);
+    cv::findContours(k.local_mask, k.local_contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+    for (const std::vector<cv::Point>& local : k.local_contours) {
+      if (cv::pointPolygonTest(local, cv::Point2f(static_cast<float>(inside.x), static_cast<float>(inside.y)),
+                               false) < 0)
+        continue;
+      const cv::Rect local_box = cv::boundingRect(local) + window.tl();
+      if (touches_border(local_box, k.smooth.cols, k.smooth.rows)) return false;
+      const bool cut_by_window = (local_box & window) != local_box || local_box.x <= window.x ||
+                                 local_box.y <= window.y || local_box.br().x >= window.br().x ||
+                                 local_box.br().y >= window.br().y;
+      if (cut_by_window) break;  // grow the window
+      const cv::Moments m = cv::moments(local);
+      if (!(m.m00 > 0.0) || !is_round_lamp(local, m, c)) return false;
+      centroid = {m.m10 / m.m00 + window.x, m.m01 / m.m00 + window.y};
+      return true;
+    }
+  }
+  return false;
+}
+
+/// The candidate levels of the relative mode, as fractions of the way from
+/// the frame's background to its peak. The brightest thing in view need not be
+/// a lamp (a light panel, a lamp darkened by vignetting next to a brighter
+/// one), so a lower level catches the dimmer lamps; each candidate is then
+/// measured at its own half maximum.
+constexpr std::array<double, 2> kCandidateLevels{0.5, 0.25};
+
+}  // namespace
 
 Measurement bearing_measurement(const Eigen::Vector2d& uv, const camera::CameraModel& camera,
                                 double pixel_sigma) {
@@ -72,8 +211,19 @@ Measurement bearing_measurement(const Eigen::Vector2d& uv, const camera::CameraM
 std::vector<ParamSpec> LampExtractor::param_specs() {
   const LampConfig d;
   return {
-      param_double("threshold", d.threshold, "grey level (0-255) above which a pixel is lamp",
-                   0.0, 255.0),
+      param_string("threshold_mode", "relative",
+                   "relative: thresholds from the image's own background, peak and noise (survives "
+                   "exposure changes); absolute: a fixed grey level `threshold`"),
+      param_double("threshold", d.threshold,
+                   "absolute mode: grey level (0-255) above which a pixel is lamp", 0.0, 255.0),
+      param_double("smoothing_sigma_px", d.smoothing_sigma,
+                   "relative mode: Gaussian smoothing before thresholding (px)", 0.3, 5.0),
+      param_double("min_contrast_sigma", d.min_contrast_sigma,
+                   "relative mode: a lamp's peak over its surroundings, in sigmas of the smoothed image's "
+                   "noise (estimated from the image)",
+                   0.0),
+      param_double("min_contrast_grey", d.min_contrast_grey,
+                   "relative mode: … and at least this many grey levels", 0.0, 255.0),
       param_double("min_area_px", d.min_area, "smallest lamp blob (px^2)", 0.0),
       param_double("max_area_px", d.max_area, "largest lamp blob (px^2)", 0.0),
       param_double("min_roundness", d.min_roundness, "minor/major axis ratio of a lamp blob", 0.0,
@@ -91,7 +241,16 @@ LampExtractor::LampExtractor(const PluginArgs& args)
     : LampExtractor([&] {
         const Params& p = args.params;
         LampConfig c;
+        const std::string mode = p.get_string("threshold_mode");
+        if (mode == "relative") c.mode = ThresholdMode::Relative;
+        else if (mode == "absolute") c.mode = ThresholdMode::Absolute;
+        else
+          throw std::invalid_argument("lamps: threshold_mode must be 'relative' or 'absolute', not '" + mode +
+                                      "'");
         c.threshold = p.get_double("threshold");
+        c.smoothing_sigma = p.get_double("smoothing_sigma_px");
+        c.min_contrast_sigma = p.get_double("min_contrast_sigma");
+        c.min_contrast_grey = p.get_double("min_contrast_grey");
         c.min_area = p.get_double("min_area_px");
         c.max_area = p.get_double("max_area_px");
         c.min_roundness = p.get_double("min_roundness");
@@ -111,14 +270,39 @@ void LampExtractor::extract(const SensorReading& reading, std::vector<Measuremen
 void LampExtractor::extract_image(const camera::GreyView& image, const camera::CameraModel& cam,
                                   std::vector<Measurement>& out) {
   Buffers& k = *buffers_;
-  cv::threshold(camera::as_mat(image), k.mask, config_.threshold, 255, cv::THRESH_BINARY);
-  cv::findContours(k.mask, k.contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
-  for (const std::vector<cv::Point>& contour : k.contours) {
-    if (touches_border(cv::boundingRect(contour), image.width, image.height)) continue;
-    const cv::Moments m = cv::moments(contour);
-    if (!is_round_lamp(contour, m, config_)) continue;
-    const Eigen::Vector2d centroid(m.m10 / m.m00, m.m01 / m.m00);
-    out.push_back(bearing_measurement(centroid, cam, config_.pixel_sigma));
+  if (config_.mode == ThresholdMode::Absolute) {
+    cv::threshold(camera::as_mat(image), k.mask, config_.threshold, 255, cv::THRESH_BINARY);
+    cv::findContours(k.mask, k.contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+    for (const std::vector<cv::Point>& contour : k.contours) {
+      if (touches_border(cv::boundingRect(contour), image.width, image.height)) continue;
+      const cv::Moments m = cv::moments(contour);
+      if (!(m.m00 > 0.0) || !is_round_lamp(contour, m, config_)) continue;
+      out.push_back(bearing_measurement({m.m10 / m.m00, m.m01 / m.m00}, cam, config_.pixel_sigma));
+    }
+    return;
+  }
+  if (!relative_statistics(k, config_, image, stats_)) return;
+  std::vector<Eigen::Vector2d> found;
+  for (const double level : kCandidateLevels) {
+    const double t = stats_.background + level * (stats_.peak - stats_.background);
+    cv::threshold(k.smooth, k.mask, t, 255, cv::THRESH_BINARY);
+    k.mask.convertTo(k.mask, CV_8U);
+    cv::findContours(k.mask, k.contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+    for (const std::vector<cv::Point>& contour : k.contours) {
+      const cv::Rect box = cv::boundingRect(contour);
+      if (touches_border(box, image.width, image.height) || box.area() > 4.0 * config_.max_area) continue;
+      // The candidate's brightest pixel seeds the local measurement.
+      cv::Point seed;
+      cv::minMaxLoc(k.smooth(box), nullptr, nullptr, nullptr, &seed);
+      seed += box.tl();
+      Eigen::Vector2d centroid;
+      if (!refine_locally(k, config_, stats_.smoothed_noise_sigma, seed, box, centroid)) continue;
+      const bool seen = std::any_of(found.begin(), found.end(),
+                                    [&](const Eigen::Vector2d& f) { return (f - centroid).norm() < 2.0; });
+      if (seen) continue;
+      found.push_back(centroid);
+      out.push_back(bearing_measurement(centroid, cam, config_.pixel_sigma));
+    }
   }
 }
 

@@ -46,4 +46,67 @@ inline Eigen::Vector3d in_camera(const Eigen::Vector3d& p_world, const Pose6& x_
   return to_sensor_frame(CoordLayout{BlockKind::Point3D}, p_world, x_mc);
 }
 
+/// One rendering variant: what another camera, exposure or building does to
+/// the images (defaults: the first renderer's), for the extractors' sweeps.
+struct RenderVariant {
+  const char* name;
+  double gain = 1.0, offset = 0.0, vignetting = 0.0, noise = 2.0, blur = 0.7;
+  double lamp_grey = 255.0, lamp_radius = 0.10, tile_darkening = 30.0, distortion_scale = 1.0;
+
+  ceiling_render::RenderSettings settings() const {
+    ceiling_render::RenderSettings s{ceiling_render::default_camera()};
+    for (double& k : s.camera.distortion) k *= distortion_scale;
+    s.gain = gain;
+    s.offset = offset;
+    s.vignetting = vignetting;
+    s.noise_sigma = noise;
+    s.blur_sigma = blur;
+    return s;
+  }
+  ceiling_render::Appearance appearance() const {
+    ceiling_render::Appearance a;
+    a.lamp_grey = lamp_grey;
+    a.lamp_radius = lamp_radius;
+    a.tile_line_darkening = tile_darkening;
+    return a;
+  }
+};
+
+/// The sweep: exposure, noise, vignetting, blur, smaller/dimmer lamps,
+/// texture and distortion, and all of what the issue reports of another
+/// renderer at once (lamps 0.12–0.15 m across a little below full white,
+/// pixel noise σ 6, plus auto exposure and vignetting).
+inline std::vector<RenderVariant> render_variants() {
+  std::vector<RenderVariant> v;
+  auto add = [&](const char* name, auto&& change) {
+    RenderVariant r{name};
+    change(r);
+    v.push_back(r);
+  };
+  add("default", [](RenderVariant&) {});
+  add("dark exposure (gain 0.6)", [](RenderVariant& r) { r.gain = 0.6; });
+  // Brighter still and the brightest room's ceiling saturates around its
+  // lamps: nothing can see them there (measured: 80 % recall at gain 1.15).
+  add("bright exposure (gain 1.1)", [](RenderVariant& r) { r.gain = 1.1; });
+  add("noisy sensor (sigma 6)", [](RenderVariant& r) { r.noise = 6.0; });
+  add("vignetting 0.4", [](RenderVariant& r) { r.vignetting = 0.4; });
+  add("blurred (sigma 1.5 px)", [](RenderVariant& r) { r.blur = 1.5; });
+  add("dim small lamps (235, r 0.065 m)", [](RenderVariant& r) {
+    r.lamp_grey = 235.0;
+    r.lamp_radius = 0.065;
+  });
+  add("strong texture, 2x distortion", [](RenderVariant& r) {
+    r.tile_darkening = 60.0;
+    r.distortion_scale = 2.0;
+  });
+  add("other renderer (all of it, gain 0.85)", [](RenderVariant& r) {
+    r.gain = 0.85;
+    r.noise = 6.0;
+    r.lamp_grey = 240.0;
+    r.lamp_radius = 0.065;
+    r.vignetting = 0.2;
+  });
+  return v;
+}
+
 }  // namespace mspace::camera_test
