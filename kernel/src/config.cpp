@@ -30,7 +30,7 @@ const std::vector<std::string> kTopKeys = {"run",         "source",       "motio
                                            "association", "initial_pose", "output", "evaluation"};
 const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor"};
 const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "plugin_path", "seed"};
-const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range"};
+const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
                                                    "join_distance"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
@@ -412,6 +412,7 @@ SensorConfig Reader::read_sensor(const Item& item, const std::vector<std::string
   sensor.extractor = instance(need(item, fields, "extractor"), sensor.name, PluginKind::Extractor);
   sensor.feeds = read_feeds(need(item, fields, "feeds"), feature_names);
   if (const Item* f = find(fields, "max_range")) sensor.max_range = number(*f, 0.0);
+  if (const Item* f = find(fields, "silent_readings")) sensor.silent_readings = integer(*f, 0);
   return sensor;
 }
 
@@ -565,6 +566,7 @@ void emit_sensors(YAML::Emitter& out, const std::vector<SensorConfig>& sensors) 
     out << YAML::Key << "feeds" << YAML::Value;
     emit_string_list(out, s.feeds);
     out << YAML::Key << "max_range" << YAML::Value << format_number(s.max_range);
+    out << YAML::Key << "silent_readings" << YAML::Value << s.silent_readings;
     out << YAML::EndMap;
   }
   out << YAML::EndMap;

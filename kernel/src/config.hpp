@@ -14,6 +14,7 @@
 //       extractor: {plugin: <name>, <parameters>}                       # required
 //       feeds: [<feature instances>]                                    # required
 //       max_range: 0 (m; features farther away are not associated; 0 = no limit)
+//       silent_readings: 200 (warn when this many readings gave no measurement or no match; 0 = never)
 //   association:  {gate_probability: 0.99, new_feature_probability: 0.9999, tentative_max_age: 20,
 //                  join_distance: 0 (m; 0 = no shared coordinates)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
@@ -63,6 +64,9 @@ struct SensorConfig {
   /// Features farther than this (m) from the sensor are not considered for
   /// association; 0 = no limit.
   double max_range = 0.0;
+  /// Health report: warn when the sensor has produced no measurement (or none
+  /// matched) in this many readings; 0 = never.
+  std::int64_t silent_readings = 200;
 };
 
 struct AssociationConfig {

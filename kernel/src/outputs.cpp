@@ -173,10 +173,36 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "timings_seconds" << YAML::Value << YAML::BeginMap;
   y << YAML::Key << "source" << YAML::Value << st.seconds_source;
   y << YAML::Key << "predict" << YAML::Value << st.seconds_predict;
+  y << YAML::Key << "extract" << YAML::Value << st.seconds_extract;
   y << YAML::Key << "associate" << YAML::Value << st.seconds_associate;
   y << YAML::Key << "update" << YAML::Value << st.seconds_update;
   y << YAML::Key << "dense_information" << YAML::Value << st.seconds_dense;
   y << YAML::Key << "extend" << YAML::Value << st.seconds_extend;
+  y << YAML::EndMap;
+  // The health report of every sensor (kernel/src/sensor_health.hpp).
+  y << YAML::Key << "sensors" << YAML::Value << YAML::BeginMap;
+  for (const SensorHealthReport& h : slam.sensor_health()) {
+    y << YAML::Key << h.sensor << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "readings" << YAML::Value << h.readings;
+    y << YAML::Key << "measurements" << YAML::Value << h.measurements;
+    y << YAML::Key << "measurements_per_reading" << YAML::Value
+      << (h.readings > 0 ? static_cast<double>(h.measurements) / static_cast<double>(h.readings) : 0.0);
+    y << YAML::Key << "matched" << YAML::Value << h.matched;
+    y << YAML::Key << "matched_fraction" << YAML::Value
+      << (h.measurements > 0 ? static_cast<double>(h.matched) / static_cast<double>(h.measurements) : 0.0);
+    y << YAML::Key << "used_in_updates" << YAML::Value << h.updates;
+    if (h.updates > 0) {
+      y << YAML::Key << "nis_ratio" << YAML::Value << h.nis_ratio;
+      y << YAML::Comment("observed / expected NIS under the gate: ~1 consistent, >1 noise too small");
+      y << YAML::Key << "mean_nis_per_row" << YAML::Value << h.mean_nis_per_row;
+      y << YAML::Key << "expected_nis_per_row" << YAML::Value << h.expected_nis_per_row;
+    }
+    y << YAML::Key << "extract_seconds" << YAML::Value << h.extract_seconds;
+    y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;
+    for (const std::string& w : h.warnings) y << w;
+    y << YAML::EndSeq;
+    y << YAML::EndMap;
+  }
   y << YAML::EndMap;
   if (s.errors) {
     const TrajectoryErrors& e = *s.errors;
@@ -233,9 +259,10 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     for (const auto& [dim, count] : by_dim) os << "  " << count << " at dim " << dim;
     os << "\n";
   }
-  const double total = st.seconds_source + st.seconds_predict + st.seconds_associate + st.seconds_update +
-                       st.seconds_dense + st.seconds_extend;
-  os << "  time: source " << st.seconds_source << " s, predict " << st.seconds_predict << " s, associate "
+  const double total = st.seconds_source + st.seconds_predict + st.seconds_extract + st.seconds_associate +
+                       st.seconds_update + st.seconds_dense + st.seconds_extend;
+  os << "  time: source " << st.seconds_source << " s, predict " << st.seconds_predict << " s, extract "
+     << st.seconds_extract << " s, associate "
      << st.seconds_associate << " s, update " << st.seconds_update << " s, dense " << st.seconds_dense
      << " s, extend " << st.seconds_extend << " s (total " << total << " s)\n";
   if (s.errors) {
@@ -250,6 +277,13 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     os << "  relations (" << r.matched << " of " << r.total << " matched): translation " << r.translation.mean
        << " ± " << r.translation.std << " m, rotation " << std::setprecision(2) << r.rotation_deg.mean << " ± "
        << r.rotation_deg.std << " deg" << std::setprecision(3) << "\n";
+  }
+  for (const SensorHealthReport& h : slam.sensor_health()) {
+    os << "  sensor " << h.sensor << ": " << h.measurements << " measurements in " << h.readings << " readings, "
+       << h.matched << " matched";
+    if (h.updates > 0) os << std::setprecision(2) << ", NIS " << h.nis_ratio << "x expected" << std::setprecision(3);
+    os << "\n";
+    for (const std::string& w : h.warnings) os << "  WARNING: " << w << "\n";
   }
   if (s.skipped_records > 0) os << "  skipped malformed input records: " << s.skipped_records << "\n";
   return os.str();

@@ -29,6 +29,9 @@ double seconds_since(Clock::time_point start) {
 /// do more harm than translation errors (ICRA §IV, "Add Information").
 constexpr double kRotationWeightMetresPerRadian = 2.0;
 
+/// Updates over which a sensor's NIS is averaged for a health warning.
+constexpr int kNisWindow = 200;
+
 bool all_finite(const Eigen::MatrixXd& m) { return m.allFinite(); }
 
 /// The directions of the robot's estimated pose coordinates `dofs` along which
@@ -148,6 +151,8 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry) : config_(config) 
       for (std::size_t i = 0; i < types_.size(); ++i)
         if (types_[i].instance == feed) slot.feeds.push_back(static_cast<int>(i));
     }
+    health_.emplace_back(sc.name, "sensors." + sc.name + ".extractor, plugin '" + sc.extractor.plugin + "'",
+                         sc.silent_readings, kNisWindow, config_.association.gate_probability);
     sensors_.push_back(std::move(slot));
   }
 
@@ -345,8 +350,12 @@ void Slam::process_sensor_reading(const SensorReading& reading, int sensor_index
     require_finite(m.C_v, "measurement covariance", sensor.config.extractor.instance, *sensor.library);
   }
   stats_.measurements += static_cast<std::int64_t>(w.measurements.size());
+  const double extract_seconds = seconds_since(t0);
+  stats_.seconds_extract += extract_seconds;
+  t0 = Clock::now();
   associate(sensor, sensor_index, w.measurements, w);
   stats_.seconds_associate += seconds_since(t0);
+  record_health(sensor_index, w, extract_seconds);
 
   t0 = Clock::now();
   update(w.matches);
@@ -481,6 +490,24 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
   // measurements create nothing.
   work.may_create.assign(meas.size(), false);
   for (std::size_t mi = 0; mi < meas.size(); ++mi) work.may_create[mi] = !meas_used[mi] && closest[mi] > 1.0;
+}
+
+// The health report of the sensor (sensor_health.hpp): counts, and the NIS of
+// the measurements its update will use; new warnings go to the log at once.
+void Slam::record_health(int sensor_index, const ReadingWork& w, double extract_seconds) {
+  SensorHealth& health = health_[static_cast<std::size_t>(sensor_index)];
+  health.record_reading(static_cast<std::int64_t>(w.measurements.size()), static_cast<std::int64_t>(w.matches.size()),
+                        extract_seconds);
+  for (const Match& match : w.matches)
+    if (features_[match.feature].feature->mspace_dim() > 0)
+      health.record_update(match.candidate.d2, static_cast<int>(match.candidate.innovation.eta.size()));
+  for (const std::string& warning : health.take_new_warnings()) log_->warn("step ", step_, ": ", warning);
+}
+
+std::vector<SensorHealthReport> Slam::sensor_health() const {
+  std::vector<SensorHealthReport> out;
+  for (const SensorHealth& h : health_) out.push_back(h.report());
+  return out;
 }
 
 // ---- Phase 2: update -------------------------------------------------------

@@ -30,6 +30,7 @@
 #include "mspace/motion_model.hpp"
 #include "mspace/source.hpp"
 #include "plugin_registry.hpp"
+#include "sensor_health.hpp"
 
 namespace mspace::kernel {
 
@@ -89,6 +90,7 @@ struct RunStats {
   std::int64_t pruned = 0;
   std::int64_t unknown_channel_readings = 0;
   double seconds_predict = 0.0;
+  double seconds_extract = 0.0;  ///< sensors' extractors (per sensor in the health reports)
   double seconds_associate = 0.0;
   double seconds_update = 0.0;
   double seconds_dense = 0.0;
@@ -136,6 +138,8 @@ class Slam {
   Eigen::MatrixXd true_landmarks() const;
   /// Malformed records the data source skipped.
   std::size_t skipped_records() const;
+  /// Health report of every sensor (measurements, matches, NIS, warnings).
+  std::vector<SensorHealthReport> sensor_health() const;
 
  private:
   struct Candidate;
@@ -148,6 +152,7 @@ class Slam {
   void process_sensor_reading(const SensorReading& reading, int sensor_index, std::vector<ReadingWork>& work);
   void associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
                  ReadingWork& work);
+  void record_health(int sensor_index, const ReadingWork& w, double extract_seconds);
   void update(std::vector<Match>& matches);
   void add_dense_information(std::vector<ReadingWork>& work);
   void extend(const std::vector<int>& touched);
@@ -168,6 +173,7 @@ class Slam {
   std::vector<std::shared_ptr<Logger>> plugin_loggers_;
   std::vector<FeatureTypeSlot> types_;
   std::vector<SensorSlot> sensors_;
+  std::vector<SensorHealth> health_;  ///< one per sensor
   std::vector<MapFeature> features_;
   std::vector<SharedCoordinate> shared_;
   int next_shared_id_ = 1;

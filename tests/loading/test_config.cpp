@@ -149,7 +149,7 @@ TEST(Config, UnknownKeysListTheAllowedOnes) {
             "test.yaml:21:1: outputs: unknown key (allowed: run, source, motion, estimator, features, sensors, "
             "association, initial_pose, output, evaluation)");
   EXPECT_EQ(config_error(edited("    mount:", "    mounts:")),
-            "test.yaml:16:5: sensors.laser.mounts: unknown key (allowed: channel, mount, extractor, feeds, max_range)");
+            "test.yaml:16:5: sensors.laser.mounts: unknown key (allowed: channel, mount, extractor, feeds, max_range, silent_readings)");
   EXPECT_EQ(config_error(edited("  name: t1\n", "  name: t1\n  speed: 3\n")),
             "test.yaml:3:3: run.speed: unknown key (allowed: name, log_level, max_steps, plugin_path, seed)");
 }

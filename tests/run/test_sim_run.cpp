@@ -91,6 +91,65 @@ TEST_F(SimRun, DefaultRunMeetsAccuracyBoundsAndBeatsDeadReckoning) {
       << "dead reckoning ATE " << odo.summary.errors->ate_rmse << " m, SLAM " << e.ate_rmse << " m";
 }
 
+// The health report in a whole run: a sensor whose extractor finds nothing is
+// named in the summary (and the log), and an extractor that claims 10× less
+// noise than the simulated sensor has is flagged as overconfident; the
+// default run's figures stay in the consistent range (its NIS ratio is below 1
+// because the planar sensor "measures" a zero elevation with a made-up σ).
+// The gate truncates what an overconfident filter sees (innovations beyond it
+// start new features instead), so the ratio cannot grow without bound: with
+// 5× too little noise everywhere it reaches ≈ 1.7.
+TEST_F(SimRun, SensorHealthNamesASilentSensorAndAnOverconfidentOne) {
+  {
+    RunConfig c = config();
+    c.max_steps = 1500;
+    const RunResult r = run(c, /*outputs=*/true);
+    const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
+    const YAML::Node laser = summary["sensors"]["laser"];
+    ASSERT_TRUE(laser) << "summary.yaml has no sensors.laser";
+    EXPECT_EQ(laser["readings"].as<std::int64_t>(), 1500);
+    EXPECT_GT(laser["matched_fraction"].as<double>(), 0.8);
+    const double ratio = laser["nis_ratio"].as<double>();
+    EXPECT_GT(ratio, 0.5);
+    EXPECT_LT(ratio, 1.2);
+    EXPECT_EQ(laser["warnings"].size(), 0u);
+  }
+  {
+    RunConfig c = config();
+    c.max_steps = 300;
+    c.sensors[0].silent_readings = 100;
+    c.sensors[0].extractor.params.set("min_range", 0.01);
+    c.sensors[0].extractor.params.set("max_range", 0.05);  // no landmark is this close: nothing passes
+    Slam slam(c, registry_);
+    while (slam.step()) {
+    }
+    const auto health = slam.sensor_health();
+    ASSERT_EQ(health.size(), 1u);
+    EXPECT_EQ(health[0].measurements, 0);
+    ASSERT_EQ(health[0].warnings.size(), 1u);
+    EXPECT_NE(health[0].warnings[0].find("0 measurements in 100 readings"), std::string::npos)
+        << health[0].warnings[0];
+    EXPECT_NE(health[0].warnings[0].find("plugin 'range_bearing'"), std::string::npos) << health[0].warnings[0];
+  }
+  {
+    RunConfig c = config();
+    c.max_steps = 1500;
+    // The filter believes the sensor and the odometry 5× better than they are.
+    c.sensors[0].extractor.params.set("range_sigma", 0.01);
+    c.sensors[0].extractor.params.set("bearing_sigma_deg", 0.1);
+    for (const char* key : {"xy_noise_per_m", "theta_noise_per_rad", "theta_noise_per_m"})
+      c.motion.params.set(key, c.motion.params.get_double(key) / 5.0);
+    Slam slam(c, registry_);
+    while (slam.step()) {
+    }
+    const auto health = slam.sensor_health();
+    ASSERT_EQ(health.size(), 1u);
+    EXPECT_GT(health[0].nis_ratio, SensorHealth::kNisRatioHigh);
+    ASSERT_FALSE(health[0].warnings.empty());
+    EXPECT_NE(health[0].warnings[0].find("overconfident"), std::string::npos) << health[0].warnings[0];
+  }
+}
+
 // Every landmark the robot passed is in the map once, where it truly is.
 TEST_F(SimRun, MapFeaturesMatchTrueLandmarks) {
   const RunConfig c = config();

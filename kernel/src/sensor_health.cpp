@@ -1,0 +1,101 @@
+#include "sensor_health.hpp"
+
+#include <cstdio>
+#include <utility>
+
+#include "chi2.hpp"
+
+namespace mspace::kernel {
+
+SensorHealth::SensorHealth(std::string sensor, std::string extractor_hint, std::int64_t silent_span, int nis_window,
+                           double gate_probability)
+    : extractor_hint_(std::move(extractor_hint)),
+      silent_span_(silent_span),
+      nis_window_(nis_window),
+      gate_probability_(gate_probability) {
+  r_.sensor = std::move(sensor);
+}
+
+void SensorHealth::warn(std::string text) {
+  r_.warnings.push_back(text);
+  new_warnings_.push_back(std::move(text));
+}
+
+void SensorHealth::record_reading(std::int64_t measurements, std::int64_t matched, double extract_seconds) {
+  ++r_.readings;
+  r_.measurements += measurements;
+  r_.matched += matched;
+  r_.extract_seconds += extract_seconds;
+  if (silent_span_ <= 0) return;
+  if (!warned_silent_ && r_.measurements == 0 && r_.readings >= silent_span_) {
+    warned_silent_ = true;
+    warn("sensor " + r_.sensor + ": 0 measurements in " + std::to_string(r_.readings) +
+         " readings — check the extractor's parameters (" + extractor_hint_ + ")");
+  }
+  if (measurements > 0) readings_since_match_ = matched > 0 ? 0 : readings_since_match_ + 1;
+  if (!warned_unmatched_ && readings_since_match_ >= silent_span_ && r_.matched == 0) {
+    warned_unmatched_ = true;
+    warn("sensor " + r_.sensor + ": none of its " + std::to_string(r_.measurements) + " measurements in " +
+         std::to_string(r_.readings) +
+         " readings matched a feature — check its mount, its measurement noise and the features it feeds");
+  }
+}
+
+double SensorHealth::expected_nis(int rows) {
+  if (rows >= static_cast<int>(expected_by_rows_.size())) expected_by_rows_.resize(static_cast<std::size_t>(rows) + 1, -1.0);
+  double& e = expected_by_rows_[static_cast<std::size_t>(rows)];
+  if (e < 0.0) {
+    const double q = chi2_quantile(gate_probability_, rows);
+    e = rows * chi2_cdf(q, rows + 2) / chi2_cdf(q, rows);
+  }
+  return e;
+}
+
+void SensorHealth::record_update(double nis, int rows) {
+  if (rows <= 0) return;
+  const double expected = expected_nis(rows);
+  ++r_.updates;
+  nis_sum_ += nis;
+  expected_sum_ += expected;
+  rows_sum_ += rows;
+  window_nis_ += nis;
+  window_expected_ += expected;
+  if (++window_count_ < nis_window_) return;
+  const double ratio = window_nis_ / window_expected_;
+  window_nis_ = window_expected_ = 0.0;
+  window_count_ = 0;
+  // Persistently: kPersistentWindows windows in a row beyond the same bound.
+  const int side = ratio > kNisRatioHigh ? 1 : ratio < kNisRatioLow ? -1 : 0;
+  windows_out_ = side != 0 && side == last_side_ ? windows_out_ + 1 : (side != 0 ? 1 : 0);
+  last_side_ = side;
+  window_ratio_sum_ = windows_out_ == 1 ? ratio : window_ratio_sum_ + ratio;
+  if (windows_out_ < kPersistentWindows) return;
+  const double mean_ratio = window_ratio_sum_ / windows_out_;
+  char figures[200];
+  std::snprintf(figures, sizeof figures,
+                "NIS %.2f times its expected value over %d consecutive windows of %d updates (up to update %lld)",
+                mean_ratio, windows_out_, nis_window_, static_cast<long long>(r_.updates));
+  if (side > 0 && !warned_high_) {
+    warned_high_ = true;
+    warn("sensor " + r_.sensor + ": " + figures +
+         " — the filter is overconfident: its measurement noise (or the motion noise) is set smaller than the "
+         "data shows");
+  } else if (side < 0 && !warned_low_) {
+    warned_low_ = true;
+    warn("sensor " + r_.sensor + ": " + figures + " — its measurement noise is set larger than the data shows");
+  }
+}
+
+std::vector<std::string> SensorHealth::take_new_warnings() { return std::exchange(new_warnings_, {}); }
+
+SensorHealthReport SensorHealth::report() const {
+  SensorHealthReport out = r_;
+  if (r_.updates > 0) {
+    out.nis_ratio = nis_sum_ / expected_sum_;
+    out.mean_nis_per_row = nis_sum_ / rows_sum_;
+    out.expected_nis_per_row = expected_sum_ / rows_sum_;
+  }
+  return out;
+}
+
+}  // namespace mspace::kernel
