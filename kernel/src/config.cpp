@@ -650,8 +650,13 @@ RunConfig parse_config(const std::string& text, const std::string& file_name_for
 }
 
 RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(file, ec);
+  if (!std::filesystem::exists(status)) throw ConfigError(file.string() + ": no such file");
+  if (std::filesystem::is_directory(status))
+    throw ConfigError(file.string() + ": is a directory, not a configuration file (e.g. config/sim_points.yaml)");
   std::ifstream in(file);
-  if (!in) throw ConfigError(file.string() + ": cannot read the configuration file");
+  if (!in) throw ConfigError(file.string() + ": cannot read the configuration file (permissions?)");
   std::ostringstream text;
   text << in.rdbuf();
   return parse_config(text.str(), file.string(), registry);

@@ -4,6 +4,7 @@
 //   mspace plugins                    every plugin found, with kind, ABI tag and parameters
 //   mspace config [CONFIG]            the fully resolved configuration
 //   mspace check PLUGIN... [--junit F] the plugin conformance suite (files or names)
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
@@ -61,15 +62,24 @@ int cmd_run(const std::string& file, const std::string& out, long long max_steps
   if (max_steps > 0) config.max_steps = max_steps;
   if (seed) config.seed = *seed;
   apply_run_seed(config);
-  kernel_log().info("configuration ", file.empty() ? default_config_name() : file, ":\n",
-                    effective_config_yaml(config));
+  // One line of what runs; the whole resolved configuration at debug level
+  // (or with `mspace config`).
+  std::string plugins = "source " + config.source.plugin + ", motion " + config.motion.plugin + ", estimator " +
+                        config.estimator.plugin + ", features";
+  for (const InstanceConfig& f : config.features) plugins += " " + f.instance + " (" + f.plugin + ")";
+  plugins += ", sensors";
+  for (const SensorConfig& s : config.sensors) plugins += " " + s.name + " (" + s.extractor.plugin + ")";
+  kernel_log().info("running ", file.empty() ? default_config_name() : file, ": ", plugins);
+  kernel_log().debug("configuration ", file.empty() ? default_config_name() : file, ":\n",
+                     effective_config_yaml(config));
   Slam slam(config, registry);
   RunOptions options;
   options.progress = !quiet;
+  options.stop_on_signals = true;
   const RunResult result = run_to_end(slam, options);
   std::cout << format_summary(result.summary, slam);
   std::cout << "  outputs in " << result.output_dir.string() << "/ (trajectory.tum, map.yaml, summary.yaml, map.png)\n";
-  return 0;
+  return result.stop_signal != 0 ? 128 + result.stop_signal : 0;  // 130 for SIGINT, 143 for SIGTERM
 }
 
 int cmd_plugins(const CommonOptions& common) {
@@ -114,6 +124,38 @@ int cmd_config(const std::string& file, const CommonOptions& common) {
   return 0;
 }
 
+/// Levenshtein distance, for "did you mean" on a mistyped subcommand.
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
+/// A first argument that is neither an option nor a subcommand: the error
+/// names it and the nearest subcommand.
+std::optional<std::string> unknown_subcommand(int argc, char** argv, const std::vector<std::string>& known) {
+  if (argc < 2 || argv[1][0] == '-') return std::nullopt;
+  const std::string given = argv[1];
+  if (std::find(known.begin(), known.end(), given) != known.end()) return std::nullopt;
+  std::string best = known.front();
+  for (const std::string& k : known)
+    if (edit_distance(given, k) < edit_distance(given, best)) best = k;
+  std::string message = "unknown command '" + given + "'";
+  if (edit_distance(given, best) <= 2) message += "; did you mean '" + best + "'?";
+  message += " (commands:";
+  for (const std::string& k : known) message += " " + k;
+  return message + "; see mspace --help)";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -151,6 +193,10 @@ int main(int argc, char** argv) {
   check->add_option("--param", check_cmd.params, "NAME=VALUE for the checked instances, e.g. a data file (repeatable)");
   add_common(check, common);
 
+  if (const auto unknown = unknown_subcommand(argc, argv, {"run", "plugins", "config", "check"})) {
+    std::cerr << "mspace: error: " << *unknown << "\n";
+    return 2;
+  }
   CLI11_PARSE(app, argc, argv);
   try {
     if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, seed, quiet, common);

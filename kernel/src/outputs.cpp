@@ -1,5 +1,6 @@
 #include "outputs.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -36,7 +37,59 @@ void emit_matrix(YAML::Emitter& y, const Eigen::MatrixXd& m) {
   y << YAML::EndSeq;
 }
 
+void write_pose_line(std::ostream& out, const StampedPose& p) {
+  const Eigen::Vector4d q = quaternion_xyzw(p.pose);
+  out << std::fixed << std::setprecision(6) << p.t << ' ' << std::setprecision(6) << p.pose[kX] << ' '
+      << p.pose[kY] << ' ' << p.pose[kZ] << ' ' << std::setprecision(9) << q[0] << ' ' << q[1] << ' ' << q[2]
+      << ' ' << q[3] << '\n';
+}
+
 }  // namespace
+
+void write_atomically(const std::filesystem::path& file,
+                      const std::function<void(const std::filesystem::path& temporary)>& write) {
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
+  const std::filesystem::path temporary =
+      file.parent_path() / (file.stem().string() + ".writing" + file.extension().string());
+  write(temporary);
+  std::error_code ec;
+  std::filesystem::rename(temporary, file, ec);
+  if (ec) throw std::runtime_error("cannot move '" + temporary.string() + "' to '" + file.string() + "': " + ec.message());
+}
+
+struct TrajectoryStream::Impl {
+  std::filesystem::path file;
+  std::ofstream out;
+  double flush_seconds = 2.0;
+  std::chrono::steady_clock::time_point last_flush = std::chrono::steady_clock::now();
+};
+
+TrajectoryStream::TrajectoryStream(const std::filesystem::path& dir, double flush_seconds)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->file = dir / "trajectory.partial.tum";
+  impl_->flush_seconds = flush_seconds;
+  impl_->out = open_for_writing(impl_->file);
+  impl_->out << "# t x y z qx qy qz qw — robot poses as estimated at each step, streamed while the run goes; "
+                "a complete run replaces this file by trajectory.tum\n";
+  impl_->out.flush();
+}
+
+TrajectoryStream::~TrajectoryStream() = default;
+
+void TrajectoryStream::append(const std::vector<StampedPose>& poses) {
+  for (; written_ < poses.size(); ++written_) write_pose_line(impl_->out, poses[written_]);
+  const auto now = std::chrono::steady_clock::now();
+  if (std::chrono::duration<double>(now - impl_->last_flush).count() >= impl_->flush_seconds) {
+    impl_->out.flush();
+    impl_->last_flush = now;
+  }
+}
+
+void TrajectoryStream::discard() {
+  impl_->out.close();
+  std::error_code ignored;
+  std::filesystem::remove(impl_->file, ignored);
+}
 
 RunSummary summarize(const Slam& slam, double wall_seconds) {
   RunSummary s;
@@ -74,12 +127,8 @@ RunSummary summarize(const Slam& slam, double wall_seconds) {
 void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
   std::ofstream out = open_for_writing(file);
   out << "# t x y z qx qy qz qw\n";
-  for (const StampedPose& p : poses) {
-    const Eigen::Vector4d q = quaternion_xyzw(p.pose);
-    out << std::fixed << std::setprecision(6) << p.t << ' ' << std::setprecision(6) << p.pose[kX] << ' '
-        << p.pose[kY] << ' ' << p.pose[kZ] << ' ' << std::setprecision(9) << q[0] << ' ' << q[1] << ' ' << q[2]
-        << ' ' << q[3] << '\n';
-  }
+  for (const StampedPose& p : poses) write_pose_line(out, p);
+  if (!out.flush()) throw std::runtime_error("cannot write '" + file.string() + "'");
 }
 
 void write_map_yaml(const std::filesystem::path& file, const Slam& slam) {
@@ -148,6 +197,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "run" << YAML::Value << s.run_name;
   y << YAML::Key << "config" << YAML::Value << s.config_file;
   y << YAML::Key << "steps" << YAML::Value << s.steps;
+  if (!s.interrupted.empty()) y << YAML::Key << "interrupted" << YAML::Value << s.interrupted;
   y << YAML::Key << "data_seconds" << YAML::Value << s.data_seconds;
   y << YAML::Key << "wall_seconds" << YAML::Value << s.wall_seconds;
   y << YAML::Key << "state_dimension" << YAML::Value << s.state_dimension;
@@ -248,6 +298,7 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
      << s.wall_seconds << " s elapsed";
   if (s.wall_seconds > 0) os << " (" << std::setprecision(1) << s.data_seconds / s.wall_seconds << "x real time)";
   os << std::setprecision(3) << "\n";
+  if (!s.interrupted.empty()) os << "  " << s.interrupted << "\n";
   os << "  measurements " << st.measurements << ", matched " << st.matched << ", used in updates " << st.updates
      << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned;
   if (st.joined > 0) os << ", shared coordinates " << st.joined;

@@ -3,7 +3,9 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -30,9 +32,40 @@ struct RunSummary {
   int nees_dof = 0;
   std::optional<RelationErrors> relations;  ///< when the configuration names a relations file
   std::size_t skipped_records = 0;          ///< malformed input records the source skipped
+  /// Empty for a complete run; else e.g. "interrupted at step 20000 of 73159 (SIGINT)".
+  std::string interrupted;
 };
 
 RunSummary summarize(const Slam& slam, double wall_seconds);
+
+/// Writes `file` atomically: `write` fills a temporary file beside it
+/// ("<stem>.writing<ext>"), which then replaces `file` by a rename, so no
+/// crash leaves a half-written file under the final name.
+void write_atomically(const std::filesystem::path& file,
+                      const std::function<void(const std::filesystem::path& temporary)>& write);
+
+/// The trajectory as the run goes: poses are appended to
+/// "trajectory.partial.tum" and flushed at least every `flush_seconds` of wall
+/// time, so a killed run loses at most that. These are the poses as estimated
+/// at each step (a smoother may correct them later); the complete run writes
+/// trajectory.tum and removes the partial file.
+class TrajectoryStream {
+ public:
+  TrajectoryStream(const std::filesystem::path& dir, double flush_seconds);
+  ~TrajectoryStream();
+  TrajectoryStream(const TrajectoryStream&) = delete;
+  TrajectoryStream& operator=(const TrajectoryStream&) = delete;
+  /// Appends the poses from index `written()` on.
+  void append(const std::vector<StampedPose>& poses);
+  std::size_t written() const { return written_; }
+  /// Removes the partial file (after the final trajectory is written).
+  void discard();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  std::size_t written_ = 0;
+};
 
 /// `t x y z qx qy qz qw` per line (TUM RGB-D benchmark format).
 void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses);

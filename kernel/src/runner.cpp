@@ -1,7 +1,10 @@
 #include "runner.hpp"
 
 #include <chrono>
+#include <csignal>
+#include <cstdlib>
 #include <exception>
+#include <memory>
 #include <string>
 
 #include "logging.hpp"
@@ -20,13 +23,63 @@ std::string status_line(const Slam& slam) {
 void write_outputs(const Slam& slam, const RunSummary& summary, const std::filesystem::path& dir) {
   const OutputConfig& out = slam.config().output;
   std::filesystem::create_directories(dir);
+  namespace fs = std::filesystem;
   if (out.trajectory) {
-    write_tum(dir / "trajectory.tum", slam.trajectory());
-    if (!slam.ground_truth().empty()) write_tum(dir / "ground_truth.tum", slam.ground_truth());
+    write_atomically(dir / "trajectory.tum", [&](const fs::path& f) { write_tum(f, slam.trajectory()); });
+    if (!slam.ground_truth().empty())
+      write_atomically(dir / "ground_truth.tum", [&](const fs::path& f) { write_tum(f, slam.ground_truth()); });
   }
-  if (out.map) write_map_yaml(dir / "map.yaml", slam);
-  if (out.summary) write_summary_yaml(dir / "summary.yaml", summary, slam);
-  if (out.picture) write_picture(dir / "map.png", slam, out.picture_size);
+  if (out.map) write_atomically(dir / "map.yaml", [&](const fs::path& f) { write_map_yaml(f, slam); });
+  if (out.summary)
+    write_atomically(dir / "summary.yaml", [&](const fs::path& f) { write_summary_yaml(f, summary, slam); });
+  if (out.picture)
+    write_atomically(dir / "map.png", [&](const fs::path& f) { write_picture(f, slam, out.picture_size); });
+}
+
+// ---- Interruption ------------------------------------------------------------
+//
+// The handler only records the signal (a sig_atomic_t write is all a handler
+// may safely do); the loop looks at it after every step. A second signal
+// while the first is being honoured ends the process at once (_Exit is
+// async-signal-safe), for a user who does not want to wait for the outputs.
+
+volatile std::sig_atomic_t g_stop_signal = 0;
+
+extern "C" void on_stop_signal(int signal) {
+  if (g_stop_signal != 0) std::_Exit(128 + signal);
+  g_stop_signal = signal;
+}
+
+/// Installs the handlers for SIGINT and SIGTERM for its lifetime.
+class StopSignals {
+ public:
+  StopSignals() {
+    g_stop_signal = 0;
+    struct sigaction action {};
+    action.sa_handler = on_stop_signal;
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, &old_int_);
+    sigaction(SIGTERM, &action, &old_term_);
+  }
+  ~StopSignals() {
+    sigaction(SIGINT, &old_int_, nullptr);
+    sigaction(SIGTERM, &old_term_, nullptr);
+    g_stop_signal = 0;
+  }
+  StopSignals(const StopSignals&) = delete;
+  StopSignals& operator=(const StopSignals&) = delete;
+  int signal() const { return g_stop_signal; }
+
+ private:
+  struct sigaction old_int_ {}, old_term_ {};
+};
+
+const char* signal_name(int signal) {
+  switch (signal) {
+    case SIGINT: return "SIGINT";
+    case SIGTERM: return "SIGTERM";
+    default: return "a signal";
+  }
 }
 
 }  // namespace
@@ -37,17 +90,29 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
   Progress progress(slam.size_hint(), options.progress);
+  std::unique_ptr<StopSignals> signals;
+  if (options.stop_on_signals) signals = std::make_unique<StopSignals>();
+  std::unique_ptr<TrajectoryStream> stream;
+  if (options.write_outputs && slam.config().output.trajectory)
+    stream = std::make_unique<TrajectoryStream>(result.output_dir, 2.0);
   std::size_t done = 0;
   try {
     while (slam.step()) {
       ++done;
       progress.update(done, status_line(slam));
+      if (stream) stream->append(slam.trajectory());
+      if (options.after_step) options.after_step(done);
+      if (signals && signals->signal() != 0) {
+        result.stop_signal = signals->signal();
+        break;
+      }
     }
   } catch (const std::exception& e) {
     progress.finish(done, status_line(slam));
     if (options.write_outputs && done > 0) {
       result.summary = summarize(slam, elapsed());
       write_outputs(slam, result.summary, result.output_dir);
+      if (stream) stream->discard();
       kernel_log().error("run stopped after ", done, " steps; the outputs of those steps were written to ",
                          result.output_dir.string());
     }
@@ -55,7 +120,18 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
   }
   progress.finish(done, status_line(slam));
   result.summary = summarize(slam, elapsed());
-  if (options.write_outputs) write_outputs(slam, result.summary, result.output_dir);
+  if (result.stop_signal != 0) {
+    const std::size_t total = slam.size_hint();
+    result.summary.interrupted = "interrupted at step " + std::to_string(done) + " of " +
+                                 (total > 0 ? std::to_string(total) : std::string("an unknown number")) + " (" +
+                                 signal_name(result.stop_signal) + ")";
+    kernel_log().warn(result.summary.interrupted, "; writing the outputs of the steps processed (",
+                      signal_name(result.stop_signal), " again ends at once)");
+  }
+  if (options.write_outputs) {
+    write_outputs(slam, result.summary, result.output_dir);
+    if (stream) stream->discard();
+  }
   return result;
 }
 

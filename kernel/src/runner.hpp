@@ -2,7 +2,9 @@
 // write the outputs the configuration asks for.
 #pragma once
 
+#include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include "outputs.hpp"
@@ -14,16 +16,26 @@ class Slam;
 struct RunOptions {
   bool progress = true;       ///< progress bar / lines on stderr
   bool write_outputs = true;  ///< trajectory, map, summary, picture
+  /// SIGINT / SIGTERM stop the run after the current step (the outputs of the
+  /// steps processed are written); a second one ends the process at once.
+  bool stop_on_signals = false;
+  /// Called after every step with the number of steps done (tests).
+  std::function<void(std::size_t)> after_step;
 };
 
 struct RunResult {
   RunSummary summary;
   std::filesystem::path output_dir;
+  int stop_signal = 0;  ///< the signal that interrupted the run, 0 if none
 };
 
-/// Runs `slam` to the end of its data. If the data or a plugin fails midway,
-/// the outputs computed so far are still written (marked as partial in the
-/// log) before the error is rethrown.
+/// Runs `slam` to the end of its data. Outputs: the trajectory is streamed to
+/// trajectory.partial.tum while the run goes (flushed every 2 s), and every
+/// final file is written atomically (TrajectoryStream, write_atomically). If
+/// the data or a plugin fails midway, the outputs computed so far are still
+/// written (marked as partial in the log) before the error is rethrown; an
+/// interruption (stop_on_signals) writes them too and returns with
+/// stop_signal set and the summary saying where it stopped.
 RunResult run_to_end(Slam& slam, const RunOptions& options);
 
 }  // namespace mspace::kernel

@@ -318,7 +318,14 @@ TEST(Config, LoadConfigReadsAFile) {
     mspace::kernel::load_config(file, registry);
     ADD_FAILURE() << "expected a ConfigError";
   } catch (const ConfigError& e) {
-    EXPECT_EQ(std::string(e.what()), file.string() + ": cannot read the configuration file");
+    EXPECT_EQ(std::string(e.what()), file.string() + ": no such file");
+  }
+  try {
+    mspace::kernel::load_config(file.parent_path(), registry);
+    ADD_FAILURE() << "expected a ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()), file.parent_path().string() +
+                                         ": is a directory, not a configuration file (e.g. config/sim_points.yaml)");
   }
 }
 

@@ -2,6 +2,13 @@
 // (config/sim_points.yaml): accuracy against ground truth, consistency of the
 // filter over many seeds, the outputs of a run, and a plugin returning NaN.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <thread>
 
 #include <algorithm>
 #include <cmath>
@@ -148,6 +155,76 @@ TEST_F(SimRun, SensorHealthNamesASilentSensorAndAnOverconfidentOne) {
     ASSERT_FALSE(health[0].warnings.empty());
     EXPECT_NE(health[0].warnings[0].find("overconfident"), std::string::npos) << health[0].warnings[0];
   }
+}
+
+// Interruption: a SIGINT after step 500 stops the run there; every output is
+// written for the steps processed, the summary says where it stopped, and
+// the streamed trajectory (present while the run goes) is gone at the end.
+TEST_F(SimRun, InterruptionWritesTheOutputsOfTheStepsProcessed) {
+  RunConfig c = config();
+  Slam slam(c, registry_);
+  RunOptions options;
+  options.progress = false;
+  options.stop_on_signals = true;
+  bool partial_seen = false;
+  options.after_step = [&](std::size_t done) {
+    if (done == 300) partial_seen = std::filesystem::exists(out_ / "trajectory.partial.tum");
+    if (done == 500) std::raise(SIGINT);
+  };
+  const RunResult r = run_to_end(slam, options);
+  EXPECT_EQ(r.stop_signal, SIGINT);
+  EXPECT_EQ(r.summary.steps, 500);
+  EXPECT_EQ(r.summary.interrupted, "interrupted at step 500 of 5961 (SIGINT)");
+  EXPECT_TRUE(partial_seen);
+  EXPECT_FALSE(std::filesystem::exists(out_ / "trajectory.partial.tum"));
+  const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
+  EXPECT_EQ(summary["interrupted"].as<std::string>(), "interrupted at step 500 of 5961 (SIGINT)");
+  std::ifstream trajectory(out_ / "trajectory.tum");
+  int lines = 0;
+  for (std::string line; std::getline(trajectory, line);)
+    if (!line.empty() && line[0] != '#') ++lines;
+  EXPECT_EQ(lines, 500);
+  for (const char* file : {"map.yaml", "map.png", "ground_truth.tum"})
+    EXPECT_TRUE(std::filesystem::exists(out_ / file)) << file;
+  // The handlers are gone after the run: the default disposition is back.
+  struct sigaction now {};
+  sigaction(SIGINT, nullptr, &now);
+  EXPECT_EQ(now.sa_handler, SIG_DFL);
+}
+
+// The same through the command line: `mspace run` on a long simulated run,
+// SIGTERM after a second, exits with 143 and writes the outputs.
+TEST_F(SimRun, TheCommandLineExitsWith143OnSigtermAndWritesTheOutputs) {
+  const std::filesystem::path long_config = out_.parent_path() / "long_sim.yaml";
+  std::filesystem::create_directories(out_);
+  {
+    std::ifstream in(kConfig);
+    std::ofstream out(long_config);
+    for (std::string line; std::getline(in, line);) out << (line == "  laps: 2" ? "  laps: 60" : line) << "\n";
+  }
+  const std::string mspace = std::string(MSPACE_BINARY_DIR) + "/bin/mspace";
+  const std::string out_dir = out_.string();
+  const std::string config_path = long_config.string();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    if (std::freopen("/dev/null", "w", stdout) == nullptr || std::freopen("/dev/null", "w", stderr) == nullptr) _exit(99);
+    execl(mspace.c_str(), "mspace", "run", config_path.c_str(), "--out", out_dir.c_str(), "--quiet",
+          "--plugin-dir", MSPACE_PLUGIN_DIR, static_cast<char*>(nullptr));
+    _exit(98);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 143) << "60 laps must take longer than 1.5 s";
+  const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
+  const std::string interrupted = summary["interrupted"].as<std::string>();
+  EXPECT_NE(interrupted.find("(SIGTERM)"), std::string::npos) << interrupted;
+  EXPECT_GT(summary["steps"].as<long long>(), 0);
+  EXPECT_TRUE(std::filesystem::exists(out_ / "trajectory.tum"));
+  EXPECT_FALSE(std::filesystem::exists(out_ / "trajectory.partial.tum"));
 }
 
 // Every landmark the robot passed is in the map once, where it truly is.
