@@ -5,6 +5,7 @@
 #include <string>
 
 #include "logging.hpp"
+#include "persistence.hpp"
 #include "progress.hpp"
 #include "slam.hpp"
 
@@ -24,7 +25,10 @@ void write_outputs(const Slam& slam, const RunSummary& summary, const std::files
     write_tum(dir / "trajectory.tum", slam.trajectory());
     if (!slam.ground_truth().empty()) write_tum(dir / "ground_truth.tum", slam.ground_truth());
   }
-  if (out.map) write_map_yaml(dir / "map.yaml", slam);
+  if (out.map) {
+    write_map_yaml(dir / "map.yaml", slam);
+    write_map_bin(dir / "map.bin", slam);  // the exact store, through the plugins' save()
+  }
   if (out.summary) write_summary_yaml(dir / "summary.yaml", summary, slam);
   if (out.picture) write_picture(dir / "map.png", slam, out.picture_size);
 }
