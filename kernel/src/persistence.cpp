@@ -153,8 +153,10 @@ class Decoder {
     return v;
   }
   Eigen::MatrixXd matrix() {
+    constexpr std::size_t kMaxSide = std::size_t{1} << 40;  // keeps rows·cols and Eigen::Index far from overflow
     const std::size_t rows = count(0), cols = count(0);
-    if (rows > 0 && cols > (bytes_.size() - at_) / 8 / rows) throw std::runtime_error("a matrix exceeds the record");
+    if (rows > kMaxSide || cols > kMaxSide || (rows > 0 && cols > (bytes_.size() - at_) / 8 / rows))
+      throw std::runtime_error("a matrix exceeds the record");
     Eigen::MatrixXd m(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
     for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = f64();
     return m;

@@ -482,6 +482,28 @@ TEST_F(PersistenceErrors, CorruptFeatureNamesFeatureAndPlugin) {
   EXPECT_NE(std::string(expect_error([&] { read_map_file(bad); }).what()).find("magic"), std::string::npos);
 }
 
+// Any damaged byte, anywhere, is caught: a PersistenceError, never a crash
+// and never a silently different map.
+TEST_F(PersistenceErrors, EveryFlippedByteIsCaught) {
+  const std::filesystem::path bad = scratch("flipped.bin");
+  int caught = 0, tried = 0;
+  for (std::size_t at = 0; at < bytes_.size(); at += 1 + bytes_.size() / 600) {
+    std::string b = bytes_;
+    b[at] = static_cast<char>(b[at] ^ (1 << (at % 8)));
+    write_bytes(bad, b);
+    ++tried;
+    try {
+      read_map_file(bad);
+      ADD_FAILURE() << "a flipped bit at byte " << at << " was not noticed";
+    } catch (const PersistenceError& e) {
+      ++caught;
+      EXPECT_EQ(e.file(), bad);
+    }
+  }
+  EXPECT_EQ(caught, tried);
+  EXPECT_GT(tried, 500);
+}
+
 TEST_F(PersistenceErrors, OtherFormatOrAbiVersionIsRefused) {
   const std::filesystem::path other = scratch("other.bin");
   std::string b = bytes_;
