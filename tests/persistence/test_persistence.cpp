@@ -580,37 +580,74 @@ TEST_F(PersistenceErrors, FailedWriteLeavesTheOldFileWhole) {
 
 // ---------------------------------------------------------------- a run
 
-TEST(Persistence, RunWritesMapBinThatRestoresThroughThePlugins) {
+/// Runs `config_file` for `steps` steps with outputs, then reads its map.bin
+/// back and restores every feature through the run's own feature types.
+struct RunCheck {
+  int tentative = 0, in_map = 0, shared = 0;
+};
+
+RunCheck check_run(const std::filesystem::path& config_file, std::int64_t steps) {
   set_log_level(LogLevel::Warn);
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
-  RunConfig config = load_config(std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "sim_points.yaml", registry);
+  RunConfig config = load_config(config_file, registry);
   config.output.dir = scratch("run").string();
   config.output.picture = false;
-  config.max_steps = 400;
+  config.max_steps = steps;
   Slam slam(config, registry);
   RunOptions options;
   options.progress = false;
   run_to_end(slam, options);
   const std::filesystem::path file = std::filesystem::path(config.output.dir) / "map.bin";
-  ASSERT_TRUE(std::filesystem::exists(file));
+  RunCheck out;
+  EXPECT_TRUE(std::filesystem::exists(file));
   EXPECT_TRUE(std::filesystem::exists(std::filesystem::path(config.output.dir) / "map.yaml"));
+  if (!std::filesystem::exists(file)) return out;
   const StoredMap map = read_map_file(file);
   EXPECT_EQ(map.run, config.name);
   EXPECT_TRUE(same(map.robot_pose, slam.pose()));
-  ASSERT_EQ(map.features.size(), slam.features().size());
+  EXPECT_EQ(map.features.size(), slam.features().size());
+  if (map.features.size() != slam.features().size()) return out;
   const std::vector<RestoredFeature> restored = restore_features(map, file, slam.feature_types());
-  int tentative = 0, in_map = 0;
   for (std::size_t i = 0; i < restored.size(); ++i) {
     const MapFeature& mf = slam.features()[i];
+    const StoredFeature& sf = map.features[i];
     EXPECT_EQ(restored[i].id, mf.id);
-    EXPECT_EQ(map.features[i].state_idx, mf.state_idx);
+    EXPECT_EQ(sf.state_idx, mf.state_idx);
+    EXPECT_EQ(sf.own_idx, mf.own_idx);
+    EXPECT_EQ(sf.shared, mf.shared);
+    EXPECT_EQ(sf.times_matched, mf.times_matched);
     expect_same_saved(mf.feature->save(), restored[i].feature->save(), "feature " + std::to_string(mf.id));
     EXPECT_TRUE(same(mf.feature->gating_covariance(), restored[i].feature->gating_covariance()));
-    (mf.feature->mspace_dim() == 0 ? tentative : in_map)++;
+    EXPECT_TRUE(same(mf.feature->B_dual(), restored[i].feature->B_dual()));
+    (mf.feature->mspace_dim() == 0 ? out.tentative : out.in_map)++;
   }
-  EXPECT_GT(in_map, 5);
-  EXPECT_GT(tentative, 0);
+  EXPECT_EQ(map.shared.size(), slam.shared_coordinates().size());
+  for (std::size_t i = 0; i < std::min(map.shared.size(), slam.shared_coordinates().size()); ++i) {
+    EXPECT_EQ(map.shared[i].id, slam.shared_coordinates()[i].id);
+    EXPECT_EQ(map.shared[i].state_idx, slam.shared_coordinates()[i].state_idx);
+    EXPECT_EQ(map.shared[i].members, slam.shared_coordinates()[i].members);
+  }
+  out.shared = static_cast<int>(map.shared.size());
+  return out;
+}
+
+TEST(Persistence, RunWritesMapBinThatRestoresThroughThePlugins) {
+  const RunCheck r = check_run(std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "sim_points.yaml", 400);
+  EXPECT_GT(r.in_map, 5);
+  EXPECT_GT(r.tentative, 0);
+}
+
+// Walls on real data: dense scan points, measured ends and shared corners.
+TEST(Persistence, IntelWallsMapRestoresThroughThePlugins) {
+  const std::filesystem::path data = std::filesystem::path(MSPACE_SOURCE_DIR).parent_path() / "shared" / "datasets";
+  if (!std::filesystem::exists(data / "intel_lab" / "intel_910_scans.txt"))
+    GTEST_SKIP() << "Intel Research Lab data not found in " << data / "intel_lab";
+  setenv("MSPACE_DATA", data.c_str(), /*overwrite=*/0);
+  const RunCheck r = check_run(std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "intel_walls.yaml", 300);
+  EXPECT_GT(r.in_map, 10);
+  EXPECT_GT(r.tentative, 0);
+  EXPECT_GT(r.shared, 0);
 }
 
 }  // namespace
