@@ -8,6 +8,7 @@
 #include <string>
 
 #include "logging.hpp"
+#include "persistence.hpp"
 #include "progress.hpp"
 #include "slam.hpp"
 
@@ -29,7 +30,10 @@ void write_outputs(const Slam& slam, const RunSummary& summary, const std::files
     if (!slam.ground_truth().empty())
       write_atomically(dir / "ground_truth.tum", [&](const fs::path& f) { write_tum(f, slam.ground_truth()); });
   }
-  if (out.map) write_atomically(dir / "map.yaml", [&](const fs::path& f) { write_map_yaml(f, slam); });
+  if (out.map) {
+    write_atomically(dir / "map.yaml", [&](const fs::path& f) { write_map_yaml(f, slam); });
+    write_map_bin(dir / "map.bin", slam);  // the exact store, through the plugins' save(); atomic itself
+  }
   if (out.summary)
     write_atomically(dir / "summary.yaml", [&](const fs::path& f) { write_summary_yaml(f, summary, slam); });
   if (out.picture)

@@ -12,6 +12,7 @@
 #include <boost/math/distributions/chi_squared.hpp>
 
 #include "mspace/pose.hpp"
+#include "mspace/saved_state.hpp"
 #include "mspace/transform.hpp"
 
 namespace mspace::hline {
@@ -21,6 +22,9 @@ const double kSqrt2 = std::numbers::sqrt2;
 constexpr double kDegree = std::numbers::pi / 180.0;
 /// Smallest height above the camera (m) at which plane weights are taken.
 constexpr double kMinHeight = 0.1;
+constexpr int kSaveVersion = 1;
+/// The plane's c, C_c, o; the rays to the end points; the view.
+constexpr int kObservationRecord = 3 + 9 + 3 + 3 + 3 + saved::kViewSize;
 
 const CoordLayout& hline_layout() {
   static const CoordLayout layout{BlockKind::Point3D, BlockKind::Point3D};
@@ -305,7 +309,32 @@ Eigen::MatrixXd HLineFeature::symmetry_directions() const {
 
 std::optional<double> HLineFeature::footprint_radius() const { return 0.5 * line_geometry(x_).L; }
 
-SavedFeature HLineFeature::save() const { return SavedFeature{x_, mdim_, anchor_}; }
+SavedFeature HLineFeature::save() const {
+  SavedFeature s{x_, mdim_, anchor_, {}, kSaveVersion};
+  if (!observations_.empty()) {
+    Eigen::MatrixXd records(kObservationRecord, static_cast<Eigen::Index>(observations_.size()));
+    for (Eigen::Index i = 0; i < records.cols(); ++i) {
+      const HLineObservation& o = observations_[static_cast<std::size_t>(i)];
+      auto col = records.col(i);
+      col.segment<3>(0) = o.plane.c;
+      saved::put_matrix(col, 3, o.plane.C_c);
+      col.segment<3>(12) = o.plane.o;
+      col.segment<3>(15) = o.ray_s;
+      col.segment<3>(18) = o.ray_e;
+      saved::put_view(col, 21, o.view);
+    }
+    s.put("observations", records);
+  }
+  if (mdim_ == 0) s.put("gating_covariance", gating_cov_);
+  return s;
+}
+
+void HLineFeature::set_saved_state(const Vec2& anchor, std::deque<HLineObservation> observations,
+                                   const Eigen::Matrix<double, 6, 6>& gating_cov) {
+  anchor_ = anchor;
+  observations_ = std::move(observations);
+  gating_cov_ = gating_cov;
+}
 
 std::optional<Extension> HLineFeature::extend(const SensorView& last_view) {
   if (observations_.empty() || mdim_ == 3) return std::nullopt;
@@ -492,7 +521,29 @@ std::unique_ptr<Feature> HLineType::restore(const SavedFeature& saved) const {
     throw std::invalid_argument("hline: saved state must hold 6 coordinates and the anchor (x, y) (got " +
                                 std::to_string(saved.coords.size()) + " and " + std::to_string(saved.extra.size()) +
                                 ")");
-  return std::make_unique<HLineFeature>(config_, Vec6(saved.coords), saved.mspace_dim, Vec2(saved.extra));
+  saved::expect_layout(saved, kSaveVersion, {"observations", "gating_covariance"}, "hline");
+  auto line = std::make_unique<HLineFeature>(config_, Vec6(saved.coords), saved.mspace_dim, Vec2(saved.extra));
+  if (saved.version == 0) return line;  // no dense information; the anchor is projected onto the line
+  // Version 1: the anchor as saved (it is on the line already: projecting it
+  // again could move it by a rounding error), the observations and the
+  // gating covariance.
+  const Eigen::MatrixXd records = saved::records(saved, "observations", kObservationRecord, "hline");
+  std::deque<HLineObservation> observations;
+  for (Eigen::Index i = 0; i < records.cols(); ++i) {
+    const Eigen::VectorXd col = records.col(i);
+    HLineObservation o;
+    o.plane.c = col.segment<3>(0);
+    o.plane.C_c = saved::get_matrix(col, 3, 3, 3);
+    o.plane.o = col.segment<3>(12);
+    o.ray_s = col.segment<3>(15);
+    o.ray_e = col.segment<3>(18);
+    o.view = saved::get_view(col, 21);
+    observations.push_back(o);
+  }
+  const Eigen::Matrix<double, 6, 6> gating =
+      saved::fixed(saved, "gating_covariance", 6, 6, Eigen::MatrixXd::Zero(6, 6), "hline");
+  line->set_saved_state(Vec2(saved.extra), std::move(observations), gating);
+  return line;
 }
 
 }  // namespace mspace::hline

@@ -123,9 +123,17 @@ class HLineFeature : public Feature {
   Eigen::MatrixXd symmetry_directions() const override;
   /// Half the length.
   std::optional<double> footprint_radius() const override;
-  /// extra = the anchor (x, y).
+  /// Version 1: extra = the anchor (x, y); arrays "observations" (a column
+  /// per stored observation: the plane's c, C_c column-major and camera
+  /// centre o, the rays to the end points, the sensor view packed by
+  /// mspace/saved_state.hpp; 66 rows) and, at dim 0, "gating_covariance" (6×6).
   SavedFeature save() const override;
   std::optional<Extension> extend(const SensorView& last_view) override;
+
+  /// Restores the exact anchor, the dense information and the gating
+  /// covariance of a saved line (FeatureType::restore).
+  void set_saved_state(const Vec2& anchor, std::deque<HLineObservation> observations,
+                       const Eigen::Matrix<double, 6, 6>& gating_cov);
 
   const Vec2& anchor() const { return anchor_; }
   int num_observations() const { return static_cast<int>(observations_.size()); }

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "mspace/pose.hpp"
+#include "mspace/saved_state.hpp"
 #include "mspace/transform.hpp"
 
 namespace mspace::point {
@@ -294,6 +295,60 @@ PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& x_f
   mdim_ = mspace_dim;
 }
 
+namespace {
+
+constexpr int kSaveVersion = 1;
+constexpr int kObservationRecord = 3 + 9 + saved::kViewSize;
+
+Eigen::MatrixXd save_observations(const std::deque<PointObservation>& list) {
+  Eigen::MatrixXd out(kObservationRecord, static_cast<Eigen::Index>(list.size()));
+  for (Eigen::Index i = 0; i < out.cols(); ++i) {
+    const PointObservation& o = list[static_cast<std::size_t>(i)];
+    auto col = out.col(i);
+    col.head<3>() = o.v;
+    saved::put_matrix(col, 3, o.C_v);
+    saved::put_view(col, 12, o.view);
+  }
+  return out;
+}
+
+std::deque<PointObservation> restore_observations(const SavedFeature& s, const char* name) {
+  const Eigen::MatrixXd a = saved::records(s, name, kObservationRecord, "point");
+  std::deque<PointObservation> out;
+  for (Eigen::Index i = 0; i < a.cols(); ++i) {
+    const Eigen::VectorXd col = a.col(i);
+    out.push_back({col.head<3>(), saved::get_matrix(col, 3, 3, 3), saved::get_view(col, 12)});
+  }
+  return out;
+}
+
+}  // namespace
+
+PointFeature::PointFeature(const PointConfig& config, const SavedFeature& s) : config_(config) {
+  saved::expect_layout(s, kSaveVersion, {"observations", "rays", "gating_covariance"}, "point");
+  if (s.coords.size() != kDim || !s.coords.allFinite() || (s.mspace_dim != 0 && s.mspace_dim != kDim) ||
+      s.extra.size() != 0) {
+    throw std::invalid_argument("point: restore needs 3 finite coordinates, dimension 0 or 3 and no extra state (got " +
+                                std::to_string(s.coords.size()) + " coordinates, dimension " +
+                                std::to_string(s.mspace_dim) + ")");
+  }
+  x_ = s.coords;
+  mdim_ = s.mspace_dim;
+  observations_ = restore_observations(s, "observations");
+  rays_ = restore_observations(s, "rays");
+  gating_cov_ = saved::fixed(s, "gating_covariance", kDim, kDim, Eigen::Matrix3d::Zero(), "point");
+  if (mdim_ != 0 && (!observations_.empty() || !rays_.empty()))
+    throw std::invalid_argument("point: an initialised point keeps no observations");
+}
+
+SavedFeature PointFeature::save() const {
+  SavedFeature s{x_, mdim_, {}, {}, kSaveVersion};
+  if (!observations_.empty()) s.put("observations", save_observations(observations_));
+  if (!rays_.empty()) s.put("rays", save_observations(rays_));
+  if (mdim_ == 0) s.put("gating_covariance", gating_cov_);
+  return s;
+}
+
 const CoordLayout& PointFeature::layout() const { return point_layout(); }
 
 // Table II: the M-space of a point is the point itself, B = I. A tentative
@@ -534,13 +589,7 @@ std::optional<FeatureSample> PointType::bearing_sample(int dim, std::uint64_t se
 }
 
 std::unique_ptr<Feature> PointType::restore(const SavedFeature& saved) const {
-  if (saved.coords.size() != kDim || !saved.coords.allFinite() || (saved.mspace_dim != 0 && saved.mspace_dim != kDim) ||
-      saved.extra.size() != 0) {
-    throw std::invalid_argument("point: restore needs 3 finite coordinates, dimension 0 or 3 and no extra state (got " +
-                                std::to_string(saved.coords.size()) + " coordinates, dimension " +
-                                std::to_string(saved.mspace_dim) + ")");
-  }
-  return std::make_unique<PointFeature>(config_, Eigen::Vector3d(saved.coords), saved.mspace_dim);
+  return std::make_unique<PointFeature>(config_, saved);
 }
 
 }  // namespace mspace::point

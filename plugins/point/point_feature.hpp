@@ -203,6 +203,10 @@ class PointFeature : public Feature {
   /// A point at x_f with M-space dimension 0 or 3 and no stored
   /// observations (map files, FeatureType::restore).
   PointFeature(const PointConfig& config, const Eigen::Vector3d& x_f, int mspace_dim);
+  /// A point rebuilt from save(): x_f, dimension, the stored observations
+  /// and rays and the gating covariance. Throws std::invalid_argument on
+  /// state it cannot read.
+  PointFeature(const PointConfig& config, const SavedFeature& saved);
 
   const CoordLayout& layout() const override;
 
@@ -239,6 +243,12 @@ class PointFeature : public Feature {
   /// pose); range/bearing/elevation also needs a range of at least
   /// `min_range_for_init`.
   std::optional<Extension> extend(const SensorView& last_view) override;
+
+  /// Version 1: arrays "observations" and "rays" (one column per stored
+  /// observation: v, C_v column-major, the sensor view packed by
+  /// mspace/saved_state.hpp; 57 rows) and, while tentative,
+  /// "gating_covariance" (3×3). No extra.
+  SavedFeature save() const override;
 
   /// Range/bearing/elevation observations currently stored (0 once initialised).
   int num_observations() const { return static_cast<int>(observations_.size()); }

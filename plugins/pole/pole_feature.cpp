@@ -8,12 +8,15 @@
 
 #include "mspace/pose.hpp"
 #include "mspace/placement.hpp"
+#include "mspace/saved_state.hpp"
 
 namespace mspace::pole {
 namespace {
 
 constexpr int kDim = 3;  ///< full M-space dimension = size of x_f
 constexpr int kGatingCovEntries = kDim * kDim;
+constexpr int kSaveVersion = 1;
+constexpr int kDetectionRecord = 3 + 9 + saved::kViewSize;  ///< v, C_v, view
 
 const CoordLayout& pole_layout() {
   static const CoordLayout layout{BlockKind::Scalar, BlockKind::Point2D};
@@ -122,11 +125,18 @@ void PoleFeature::add_dense_information(const Measurement& m, const SensorView& 
 }
 
 SavedFeature PoleFeature::save() const {
-  SavedFeature saved{x_, mdim_, {}};
+  SavedFeature saved{x_, mdim_, {}, {}, kSaveVersion};
   if (mdim_ == 0) {
     saved.extra.resize(1 + kGatingCovEntries);
     saved.extra[0] = detections_;
     for (int i = 0; i < kGatingCovEntries; ++i) saved.extra[1 + i] = gating_cov_(i / kDim, i % kDim);
+  }
+  if (latest_) {
+    Eigen::VectorXd record(kDetectionRecord);
+    record.head<3>() = latest_->v;
+    saved::put_matrix(record, 3, latest_->C_v);
+    saved::put_view(record, 12, latest_->view);
+    saved.put("latest", record);
   }
   return saved;
 }
@@ -203,10 +213,12 @@ std::optional<FeatureSample> PoleType::sample(int dim, std::uint64_t seed) const
 }
 
 std::unique_ptr<Feature> PoleType::restore(const SavedFeature& saved) const {
+  saved::expect_layout(saved, kSaveVersion, {"latest"}, "pole");
   if (saved.coords.size() != kDim || !saved.coords.allFinite())
     throw std::invalid_argument("pole: saved coordinates must be 3 finite numbers (radius, x, y)");
   if (saved.mspace_dim == kDim) {
-    if (saved.extra.size() != 0) throw std::invalid_argument("pole: an initialised pole has no extra state");
+    if (saved.extra.size() != 0 || !saved.arrays.empty())
+      throw std::invalid_argument("pole: an initialised pole has no extra state");
     return std::make_unique<PoleFeature>(config_, saved.coords, kDim, 0, Eigen::Matrix3d::Zero());
   }
   if (saved.mspace_dim != 0 || saved.extra.size() != 1 + kGatingCovEntries || !saved.extra.allFinite())
@@ -215,7 +227,17 @@ std::unique_ptr<Feature> PoleType::restore(const SavedFeature& saved) const {
         "(detections, gating covariance)");
   Eigen::Matrix3d gating_cov;
   for (int i = 0; i < kGatingCovEntries; ++i) gating_cov(i / kDim, i % kDim) = saved.extra[1 + i];
-  return std::make_unique<PoleFeature>(config_, saved.coords, 0, static_cast<int>(saved.extra[0]), gating_cov);
+  const double detections = saved.extra[0];
+  if (!(detections >= 0.0 && detections <= 1e9 && std::floor(detections) == detections))
+    throw std::invalid_argument("pole: the saved number of detections is not a non-negative integer");
+  auto pole = std::make_unique<PoleFeature>(config_, saved.coords, 0, static_cast<int>(detections), gating_cov);
+  const Eigen::MatrixXd latest = saved::records(saved, "latest", kDetectionRecord, "pole");
+  if (latest.cols() > 1) throw std::invalid_argument("pole: at most one saved 'latest' detection");
+  if (latest.cols() == 1) {
+    const Eigen::VectorXd record = latest.col(0);
+    pole->set_latest({record.head<3>(), saved::get_matrix(record, 3, 3, 3), saved::get_view(record, 12)});
+  }
+  return pole;
 }
 
 }  // namespace mspace::pole

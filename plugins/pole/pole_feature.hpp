@@ -71,6 +71,8 @@ class PoleFeature : public Feature {
   /// or 3, detections counted so far and the gating covariance (dim 0).
   PoleFeature(const PoleConfig& config, const Eigen::Vector3d& x_f, int mspace_dim, int detections,
               const Eigen::Matrix3d& gating_cov);
+  /// Sets the newest detection of a restored tentative pole (see save()).
+  void set_latest(const PoleDetection& detection) { latest_ = detection; }
 
   const CoordLayout& layout() const override;
 
@@ -92,8 +94,10 @@ class PoleFeature : public Feature {
   /// measurement a pole does not understand.
   void add_dense_information(const Measurement& m, const SensorView& view) override;
 
-  /// extra = (detections, gating covariance row-major) for a tentative pole,
-  /// empty once initialised.
+  /// Version 1: extra = (detections, gating covariance row-major) for a
+  /// tentative pole, empty once initialised; array "latest" (57 × 1: v, C_v
+  /// column-major, the sensor view packed by mspace/saved_state.hpp) while a
+  /// newest detection is kept.
   SavedFeature save() const override;
 
   /// The estimated trunk radius (x_f's scalar block), for pictures.

@@ -11,6 +11,7 @@
 
 #include "mspace/measurements/line_segment2d.hpp"
 #include "mspace/pose.hpp"
+#include "mspace/saved_state.hpp"
 #include "mspace/transform.hpp"
 
 namespace mspace::wall {
@@ -18,6 +19,9 @@ namespace {
 
 namespace ls = line_segment;
 const double kSqrt2 = std::numbers::sqrt2;
+constexpr int kSaveVersion = 1;
+/// v, C_v, flags, view, real start (seen, x, y), real end (seen, x, y), point count.
+constexpr int kObservationRecord = 4 + 16 + 1 + saved::kViewSize + 6 + 1;
 
 const CoordLayout& wall_layout() {
   static const CoordLayout layout{BlockKind::Point2D, BlockKind::Point2D};
@@ -381,13 +385,45 @@ Eigen::MatrixXd WallFeature::symmetry_directions() const {
   return dirs;
 }
 
-// extra = (measured ends…, start shared, end shared, L_s, anchor x, anchor y).
+// extra = (measured ends…, start shared, end shared, L_s, anchor x, anchor y);
+// the dense information as arrays (see the header).
 SavedFeature WallFeature::save() const {
   const auto n = static_cast<Eigen::Index>(ends_.size());
-  SavedFeature s{x_, mdim_, Eigen::VectorXd(n + 5)};
+  SavedFeature s{x_, mdim_, Eigen::VectorXd(n + 5), {}, kSaveVersion};
   for (Eigen::Index i = 0; i < n; ++i) s.extra[i] = ends_[static_cast<std::size_t>(i)];
   s.extra.tail<5>() << (shared_[kStart] ? 1.0 : 0.0), (shared_[kEnd] ? 1.0 : 0.0), L_s_, anchor_;
+  if (!observations_.empty()) {
+    Eigen::MatrixXd records(kObservationRecord, static_cast<Eigen::Index>(observations_.size()));
+    Eigen::Index total = 0;
+    for (const WallObservation& o : observations_) total += o.points.cols();
+    Eigen::MatrixXd points(2, total);
+    Eigen::Index at = 0;
+    for (Eigen::Index i = 0; i < records.cols(); ++i) {
+      const WallObservation& o = observations_[static_cast<std::size_t>(i)];
+      auto col = records.col(i);
+      col.head<4>() = o.v;
+      saved::put_matrix(col, 4, o.C_v);
+      col[20] = o.flags;
+      saved::put_view(col, 21, o.view);
+      for (int e : {kStart, kEnd}) {
+        const int base = 21 + saved::kViewSize + 3 * e;
+        col[base] = o.real_end[e] ? 1.0 : 0.0;
+        col.segment<2>(base + 1) = o.real_end[e] ? *o.real_end[e] : Vec2::Zero();
+      }
+      col[kObservationRecord - 1] = static_cast<double>(o.points.cols());
+      points.middleCols(at, o.points.cols()) = o.points;
+      at += o.points.cols();
+    }
+    s.put("observations", records);
+    s.put("points", points);
+  }
+  if (mdim_ == 0) s.put("gating_covariance", gating_cov_);
   return s;
+}
+
+void WallFeature::set_dense(std::deque<WallObservation> observations, const Eigen::Matrix4d& gating_cov) {
+  observations_ = std::move(observations);
+  gating_cov_ = gating_cov;
 }
 
 int WallFeature::own_dims() const {
@@ -601,8 +637,44 @@ std::optional<FeatureSample> WallType::sample(int dim, std::uint64_t seed) const
   return out;
 }
 
+namespace {
+
+/// The dense information of a saved wall (see WallFeature::save).
+std::deque<WallObservation> restore_observations(const SavedFeature& saved) {
+  const Eigen::MatrixXd records = saved::records(saved, "observations", kObservationRecord, "wall");
+  const Eigen::MatrixXd points = saved::records(saved, "points", 2, "wall");
+  std::deque<WallObservation> out;
+  Eigen::Index at = 0;
+  for (Eigen::Index i = 0; i < records.cols(); ++i) {
+    const Eigen::VectorXd col = records.col(i);
+    WallObservation o;
+    o.v = col.head<4>();
+    o.C_v = saved::get_matrix(col, 4, 4, 4);
+    const double flags = col[20], count = col[kObservationRecord - 1];
+    if (!(flags >= 0.0 && flags <= 4294967295.0 && std::floor(flags) == flags) ||
+        !(count >= 0.0 && std::floor(count) == count && at + static_cast<Eigen::Index>(count) <= points.cols()))
+      throw std::invalid_argument("wall: saved observation " + std::to_string(i) +
+                                  " has malformed flags or more points than the saved 'points'");
+    o.flags = static_cast<std::uint32_t>(flags);
+    o.view = saved::get_view(col, 21);
+    for (int e : {kStart, kEnd}) {
+      const int base = 21 + saved::kViewSize + 3 * e;
+      if (col[base] != 0.0) o.real_end[e] = Vec2(col.segment<2>(base + 1));
+    }
+    o.points = points.middleCols(at, static_cast<Eigen::Index>(count));
+    at += static_cast<Eigen::Index>(count);
+    out.push_back(std::move(o));
+  }
+  if (at != points.cols()) throw std::invalid_argument("wall: saved 'points' holds points of no observation");
+  return out;
+}
+
+}  // namespace
+
 std::unique_ptr<Feature> WallType::restore(const SavedFeature& saved) const {
-  if (saved.coords.size() != 4) throw std::invalid_argument("wall: saved coordinates must have 4 numbers");
+  saved::expect_layout(saved, kSaveVersion, {"observations", "points", "gating_covariance"}, "wall");
+  if (saved.coords.size() != 4 || !saved.coords.allFinite() || !saved.extra.allFinite())
+    throw std::invalid_argument("wall: saved coordinates must be 4 finite numbers");
   const Eigen::Index n_ends = saved.extra.size() - 5;
   if (n_ends < 0)
     throw std::invalid_argument(
@@ -620,6 +692,8 @@ std::unique_ptr<Feature> WallType::restore(const SavedFeature& saved) const {
   if (shared[kStart] || shared[kEnd]) wall->set_shared(shared, saved.extra[n_ends + 2]);
   if (wall->mspace_dim() != saved.mspace_dim)
     throw std::invalid_argument("wall: saved M-space dimension does not match its ends and shared corners");
+  wall->set_dense(restore_observations(saved),
+                  saved::fixed(saved, "gating_covariance", 4, 4, Eigen::Matrix4d::Zero(), "wall"));
   return wall;
 }
 

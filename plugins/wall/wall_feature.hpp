@@ -144,6 +144,12 @@ class WallFeature : public Feature {
   void apply_perturbation(const Eigen::VectorXd& dx_p) override;
   void add_dense_information(const Measurement& m, const SensorView& view) override;
   Eigen::MatrixXd symmetry_directions() const override;
+  /// Version 1: extra = (measured ends…, start shared, end shared, L_s,
+  /// anchor x, anchor y); arrays "observations" (a column per stored
+  /// observation: v, C_v column-major, flags, the sensor view packed by
+  /// mspace/saved_state.hpp, the real start (seen, x, y), the real end (seen,
+  /// x, y), its number of points; 73 rows), "points" (2 × all their inlier
+  /// points, in order) and, while tentative, "gating_covariance" (4×4).
   SavedFeature save() const override;
   std::optional<Extension> extend(const SensorView& last_view) override;
   bool can_share(int block) const override;
@@ -160,6 +166,8 @@ class WallFeature : public Feature {
   double shared_length() const { return L_s_; }
   /// Restores sharing (map files): the ends shared and L_s.
   void set_shared(const std::array<bool, 2>& shared, double L_s);
+  /// Restores the dense information and the gating covariance (map files).
+  void set_dense(std::deque<WallObservation> observations, const Eigen::Matrix4d& gating_cov);
 
  private:
   bool in_mspace(int end) const;

@@ -207,15 +207,115 @@ double feature_difference(const Feature& a, const Feature& b, const Probe& p) {
   return std::max(d, ea.allFinite() && eb.allFinite() ? difference(ea, eb) : kNaN);
 }
 
+/// Largest difference between two saved states; +inf when their layout
+/// (dimension, version, array names or sizes) differs.
+double saved_difference(const SavedFeature& a, const SavedFeature& b) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  if (a.mspace_dim != b.mspace_dim || a.version != b.version || a.arrays.size() != b.arrays.size()) return kInf;
+  double d = std::max(difference(a.coords, b.coords), difference(a.extra, b.extra));
+  for (std::size_t i = 0; i < a.arrays.size(); ++i) {
+    if (a.arrays[i].name != b.arrays[i].name) return kInf;
+    d = std::max(d, difference(a.arrays[i].value, b.arrays[i].value));
+  }
+  return d;
+}
+
+/// Largest difference between two extensions (+inf when only one extended).
+double extension_difference(const std::optional<Extension>& a, const std::optional<Extension>& b) {
+  if (a.has_value() != b.has_value()) return std::numeric_limits<double>::infinity();
+  if (!a) return 0.0;
+  if (a->new_dims != b->new_dims || a->sensor != b->sensor) return std::numeric_limits<double>::infinity();
+  return std::max(
+      {difference(a->J_sensor, b->J_sensor), difference(a->J_own, b->J_own), difference(a->C_new, b->C_new)});
+}
+
+/// Phases 3 and 4 on one feature: add_dense_information then extend, with
+/// an exception counted as an outcome (a restored copy must throw too).
+struct FeedOutcome {
+  bool threw = false;
+  std::optional<Extension> extension;
+};
+
+FeedOutcome feed(Feature& f, const Measurement& m, const SensorView& view) {
+  FeedOutcome out;
+  try {
+    f.add_dense_information(m, view);
+    out.extension = f.extend(view);
+  } catch (const std::exception&) {
+    out.threw = true;
+  }
+  return out;
+}
+
 void check_round_trip(const Probe& p, Recorder& r) {
   guarded(r, "feature.save_restore", [&] {
-    std::unique_ptr<Feature> copy = p.type.restore(p.sample.feature->save());
+    const SavedFeature saved = p.sample.feature->save();
+    std::unique_ptr<Feature> copy = p.type.restore(saved);
     if (copy == nullptr) {
       r.fail("feature.save_restore", "restore() returned nullptr");
       return;
     }
     r.at_most("feature.save_restore", feature_difference(*p.sample.feature, *copy, p), kRoundTripTol,
               "restore(save()) differs from the original");
+    r.at_most("feature.save_restore_state", saved_difference(saved, copy->save()), kRoundTripTol,
+              "restore(save()).save() differs from save(): state is lost or changed on the way");
+  });
+}
+
+// Dense information must survive save/restore: a copy restored after the
+// first observation, fed the same observations as the original, must give
+// the same innovations, gating covariances, coordinates and extensions.
+void check_round_trip_future(const Probe& p, Recorder& r) {
+  guarded(r, "feature.save_restore_future", [&] {
+    std::optional<FeatureSample> s = p.type.sample(p.dim, p.seed);
+    if (!s || !s->feature) {
+      r.fail("feature.save_restore_future", "sample() returned nothing");
+      return;
+    }
+    Feature& original = *s->feature;
+    SensorView view;
+    view.x_ms = s->x_ms;
+    view.C_ms = Mat6::Identity() * 1e-6;
+    auto view_at = [&](int k) {
+      view.t = 0.1 * k;
+      view.path_distance = 0.1 * k;
+      return view;
+    };
+    feed(original, s->measurement, view_at(1));
+    std::unique_ptr<Feature> copy = p.type.restore(original.save());
+    if (copy == nullptr) {
+      r.fail("feature.save_restore_future", "restore() returned nullptr");
+      return;
+    }
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    // The innovations of both for the sample's measurement (sizes may change with the dimension).
+    auto innovation_difference = [&](const Feature& a, const Feature& b) {
+      Innovation ia, ib;
+      const bool oka = a.innovation(to_sensor_frame(a.layout(), a.coords(), s->x_ms), s->measurement, ia);
+      const bool okb = b.innovation(to_sensor_frame(b.layout(), b.coords(), s->x_ms), s->measurement, ib);
+      if (oka != okb) return kInf;
+      if (!oka) return 0.0;
+      return std::max(
+          {difference(ia.eta, ib.eta), difference(ia.J_eta_o, ib.J_eta_o), difference(ia.J_eta_v, ib.J_eta_v)});
+    };
+    double worst = 0.0;
+    int extensions = 0;
+    for (int k = 2; k <= kMaxFeeds && extensions < 2; ++k) {
+      const SensorView v = view_at(k);
+      const FeedOutcome a = feed(original, s->measurement, v), b = feed(*copy, s->measurement, v);
+      if (a.threw != b.threw) worst = kInf;
+      worst = std::max(worst, extension_difference(a.extension, b.extension));
+      worst = std::max(worst, difference(original.coords(), copy->coords()));
+      worst = std::max(worst, original.mspace_dim() == copy->mspace_dim() ? 0.0 : kInf);
+      worst = std::max(worst, difference(original.gating_covariance(), copy->gating_covariance()));
+      worst = std::max(worst, difference(original.B_dual(), copy->B_dual()));
+      worst = std::max(worst, innovation_difference(original, *copy));
+      if (a.extension) ++extensions;
+      if (a.threw) break;
+    }
+    r.at_most("feature.save_restore_future", worst, kRoundTripTol,
+              "a copy restored after one observation, fed the same observations, behaves differently (dim " +
+                  std::to_string(p.dim) + ", seed " + std::to_string(p.seed) + ")");
   });
 }
 
@@ -412,6 +512,7 @@ void check_sample(const FeatureType& type, int dim, std::uint64_t seed, Recorder
   check_jacobians(p, r);
   check_symmetries(p, r);
   check_round_trip(p, r);
+  check_round_trip_future(p, r);
   check_determinism(p, r);
   check_wrong_sizes(p, r);
 }

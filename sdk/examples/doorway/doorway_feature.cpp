@@ -8,6 +8,7 @@
 #include <string>
 
 #include "mspace/pose.hpp"
+#include "mspace/saved_state.hpp"
 #include "mspace/transform.hpp"
 
 namespace doorway {
@@ -20,6 +21,8 @@ using mspace::Measurement;
 using mspace::SensorView;
 
 constexpr int kSize = 4;  ///< x_f = (p1, p2)
+constexpr int kSaveVersion = 1;
+constexpr int kObservationRecord = 4 + 16 + mspace::saved::kViewSize;  ///< v, C_v, view
 
 const CoordLayout& doorway_layout() {
   static const CoordLayout layout{BlockKind::Point2D, BlockKind::Point2D};
@@ -130,9 +133,16 @@ DoorwayFeature::DoorwayFeature(const DoorwayConfig& config, const Eigen::Vector4
 }
 
 DoorwayFeature::DoorwayFeature(const DoorwayConfig& config, const mspace::SavedFeature& saved) : config_(config) {
+  mspace::saved::expect_layout(saved, kSaveVersion, {"observations", "gating_covariance"}, "doorway");
   x_ = saved.coords;
   mdim_ = saved.mspace_dim;
   if (saved.extra.size() == 3) width_evidence_ = saved.extra;
+  const Eigen::MatrixXd records = mspace::saved::records(saved, "observations", kObservationRecord, "doorway");
+  for (Eigen::Index i = 0; i < records.cols(); ++i) {
+    const Eigen::VectorXd col = records.col(i);
+    observations_.push_back({col.head<4>(), mspace::saved::get_matrix(col, 4, 4, 4), mspace::saved::get_view(col, 20)});
+  }
+  gating_cov_ = mspace::saved::fixed(saved, "gating_covariance", 4, 4, Eigen::Matrix4d::Zero(), "doorway");
 }
 
 const CoordLayout& DoorwayFeature::layout() const { return doorway_layout(); }
@@ -252,7 +262,22 @@ std::optional<Extension> DoorwayFeature::extend(const SensorView& last_view) {
   return std::nullopt;
 }
 
-mspace::SavedFeature DoorwayFeature::save() const { return {x_, mdim_, width_evidence_}; }
+mspace::SavedFeature DoorwayFeature::save() const {
+  mspace::SavedFeature s{x_, mdim_, width_evidence_, {}, kSaveVersion};
+  if (!observations_.empty()) {
+    Eigen::MatrixXd records(kObservationRecord, static_cast<Eigen::Index>(observations_.size()));
+    for (Eigen::Index i = 0; i < records.cols(); ++i) {
+      const JambObservation& o = observations_[static_cast<std::size_t>(i)];
+      auto col = records.col(i);
+      col.head<4>() = o.v;
+      mspace::saved::put_matrix(col, 4, o.C_v);
+      mspace::saved::put_view(col, 20, o.view);
+    }
+    s.put("observations", records);
+  }
+  if (mdim_ == 0) s.put("gating_covariance", gating_cov_);
+  return s;
+}
 
 // ---------------------------------------------------------------- DoorwayType
 
@@ -300,7 +325,7 @@ std::optional<mspace::FeatureSample> DoorwayType::sample(int dim, std::uint64_t 
     view.C_ms = mspace::Mat6::Identity() * 1e-4;
     s.feature = std::make_unique<DoorwayFeature>(config_, v, Eigen::Matrix4d(s.measurement.C_v), view);
   } else {
-    s.feature = restore({mspace::to_map_frame(doorway_layout(), q, s.x_ms), dim, {}});
+    s.feature = restore({mspace::to_map_frame(doorway_layout(), q, s.x_ms), dim, {}, {}, 0});
   }
   return s;
 }

@@ -54,7 +54,8 @@ class DoorwayFeature final : public mspace::Feature {
   /// A tentative doorway at the back-projection of v seen from `view`.
   DoorwayFeature(const DoorwayConfig& config, const Eigen::Vector4d& v, const Eigen::Matrix4d& C_v,
                  const mspace::SensorView& view);
-  /// A doorway from saved state (see save()).
+  /// A doorway from saved state (see save()); throws std::invalid_argument
+  /// on state it cannot read.
   DoorwayFeature(const DoorwayConfig& config, const mspace::SavedFeature& saved);
 
   const mspace::CoordLayout& layout() const override;
@@ -67,7 +68,11 @@ class DoorwayFeature final : public mspace::Feature {
   void apply_perturbation(const Eigen::VectorXd& dx_p) override;
   void add_dense_information(const mspace::Measurement& m, const mspace::SensorView& view) override;
   std::optional<mspace::Extension> extend(const mspace::SensorView& last_view) override;
-  /// extra = (Σ w/σ², Σ 1/σ², count) of the width evidence gathered at dim 3.
+  /// Version 1: extra = (Σ w/σ², Σ 1/σ², count) of the width evidence
+  /// gathered at dim 3; arrays "observations" (a column per stored
+  /// observation of a tentative doorway: v, C_v column-major, the sensor view
+  /// packed by mspace/saved_state.hpp; 65 rows) and, at dim 0,
+  /// "gating_covariance" (4×4).
   mspace::SavedFeature save() const override;
 
  private:

@@ -14,6 +14,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -45,11 +46,45 @@ struct Extension {
   Eigen::MatrixXd C_new;     ///< new_dims × new_dims, symmetric positive definite
 };
 
-/// Everything needed to rebuild a feature (map files, conformance round trip).
+/// One named array of a feature's saved state: a matrix of doubles that map
+/// files store to the bit (docs/persistence.md).
+struct SavedArray {
+  std::string name;
+  Eigen::MatrixXd value;
+};
+
+/// Everything needed to rebuild a feature that behaves exactly as the saved
+/// one: the same innovations, the same future add_dense_information() and
+/// extend() results (map files, checkpoints, the conformance round trip).
+/// The kernel stores it through kernel/src/persistence.cpp; only the plugin
+/// knows what `extra` and `arrays` mean.
 struct SavedFeature {
   Eigen::VectorXd coords;  ///< x_f
   int mspace_dim = 0;
   Eigen::VectorXd extra;   ///< type-specific state (e.g. lengths at join time), may be empty
+  /// Dense information and any other state, as named arrays (names unique
+  /// within a feature, the plugin's own), e.g. one column per stored
+  /// observation (mspace/saved_state.hpp packs sensor views).
+  std::vector<SavedArray> arrays{};
+  /// The plugin's own version of this layout (0 = unversioned); restore()
+  /// refuses versions it cannot read.
+  int version = 0;
+
+  /// Adds (or replaces) array `name`.
+  void put(const std::string& name, Eigen::MatrixXd value) {
+    for (SavedArray& a : arrays)
+      if (a.name == name) {
+        a.value = std::move(value);
+        return;
+      }
+    arrays.push_back({name, std::move(value)});
+  }
+  /// Array `name`, nullptr when absent.
+  const Eigen::MatrixXd* find(const std::string& name) const {
+    for (const SavedArray& a : arrays)
+      if (a.name == name) return &a.value;
+    return nullptr;
+  }
 };
 
 class Feature;
@@ -141,8 +176,11 @@ class Feature {
   /// The default throws std::logic_error.
   virtual Eigen::MatrixXd share_block(int block, const Eigen::VectorXd& value);
 
-  /// The feature's state for map files; FeatureType::restore inverts it.
-  virtual SavedFeature save() const { return SavedFeature{x_, mdim_, {}}; }
+  /// The feature's whole state — x_f, the M-space dimension and everything
+  /// that decides its future behaviour (dense information, gating
+  /// covariance, anchors, …) — for map files and checkpoints;
+  /// FeatureType::restore inverts it exactly (bit for bit).
+  virtual SavedFeature save() const { return SavedFeature{x_, mdim_, {}, {}, 0}; }
 
   /// Phase 4: add M-space dimensions if the dense information supports it.
   /// The feature updates x_f and its dimension itself and returns what the
@@ -175,7 +213,10 @@ class FeatureType : public PluginObject {
   /// reachable. The default throws std::logic_error (the suite reports the
   /// type as not checkable).
   virtual std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const;
-  /// Rebuilds a feature from Feature::save(). The default throws std::logic_error.
+  /// Rebuilds a feature from Feature::save(): restore(f.save()) must behave
+  /// exactly as f from then on. Throws std::invalid_argument for state it
+  /// cannot read (wrong sizes, unknown version). The default throws
+  /// std::logic_error.
   virtual std::unique_ptr<Feature> restore(const SavedFeature& saved) const;
 };
 

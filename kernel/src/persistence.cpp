@@ -1,0 +1,680 @@
+// persistence.cpp — see persistence.hpp and docs/persistence.md.
+#include "persistence.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <string_view>
+#include <type_traits>
+
+#include "mspace/abi.hpp"
+#include "slam.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+static_assert(std::endian::native == std::endian::little || std::endian::native == std::endian::big);
+static_assert(sizeof(double) == 8 && std::numeric_limits<double>::is_iec559, "map files store IEEE-754 doubles");
+
+/// PNG-style: a non-text byte, the name, CR LF, ^Z, LF — so that text-mode
+/// transfers and `cat` of a binary are caught at once.
+constexpr std::array<char, 8> kMagic = {'\x89', 'M', 'S', 'P', '\r', '\n', '\x1a', '\n'};
+constexpr std::size_t kFrameSize = 4 + 8 + 4 + 8;  ///< tag, key, aux, length (before the frame CRC)
+
+constexpr std::uint32_t tag_of(const char (&s)[5]) {
+  return static_cast<std::uint32_t>(static_cast<unsigned char>(s[0])) |
+         static_cast<std::uint32_t>(static_cast<unsigned char>(s[1])) << 8 |
+         static_cast<std::uint32_t>(static_cast<unsigned char>(s[2])) << 16 |
+         static_cast<std::uint32_t>(static_cast<unsigned char>(s[3])) << 24;
+}
+constexpr std::uint32_t kHead = tag_of("HEAD");
+constexpr std::uint32_t kType = tag_of("TYPE");
+constexpr std::uint32_t kFeat = tag_of("FEAT");
+constexpr std::uint32_t kShrd = tag_of("SHRD");
+constexpr std::uint32_t kEnd = tag_of("END ");
+
+std::string tag_name(std::uint32_t tag) {
+  std::string s;
+  for (int i = 0; i < 4; ++i) {
+    const char c = static_cast<char>((tag >> (8 * i)) & 0xff);
+    s += (c >= 32 && c < 127) ? c : '?';
+  }
+  return s;
+}
+
+// ---------------------------------------------------------------- CRC-32
+
+/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320), as zlib and PNG.
+class Crc32 {
+ public:
+  void add(const void* data, std::size_t size) {
+    static const std::array<std::uint32_t, 256> table = [] {
+      std::array<std::uint32_t, 256> t{};
+      for (std::uint32_t i = 0; i < 256; ++i) {
+        std::uint32_t c = i;
+        for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+        t[i] = c;
+      }
+      return t;
+    }();
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < size; ++i) crc_ = table[(crc_ ^ p[i]) & 0xffu] ^ (crc_ >> 8);
+  }
+  std::uint32_t value() const { return crc_ ^ 0xffffffffu; }
+
+ private:
+  std::uint32_t crc_ = 0xffffffffu;
+};
+
+std::uint32_t crc32(const std::string& bytes) {
+  Crc32 c;
+  c.add(bytes.data(), bytes.size());
+  return c.value();
+}
+
+// ---------------------------------------------------------------- encoding
+
+/// Appends little-endian values to a byte string (one record's payload).
+class Encoder {
+ public:
+  template <class T>
+  void put(T value) {
+    static_assert(std::is_arithmetic_v<T>);
+    std::array<char, sizeof(T)> b;
+    std::memcpy(b.data(), &value, sizeof(T));
+    if constexpr (std::endian::native == std::endian::big) std::reverse(b.begin(), b.end());
+    bytes_.append(b.data(), b.size());
+  }
+  void i32(std::int64_t v) { put(static_cast<std::int32_t>(v)); }
+  void i64(std::int64_t v) { put(v); }
+  void u64(std::size_t v) { put(static_cast<std::uint64_t>(v)); }
+  void f64(double v) { put(v); }
+  void str(const std::string& s) {
+    u64(s.size());
+    bytes_ += s;
+  }
+  void ints(const std::vector<int>& v) {
+    u64(v.size());
+    for (int x : v) i32(x);
+  }
+  /// rows, cols, then the values column-major.
+  void matrix(const Eigen::MatrixXd& m) {
+    u64(static_cast<std::size_t>(m.rows()));
+    u64(static_cast<std::size_t>(m.cols()));
+    for (Eigen::Index i = 0; i < m.size(); ++i) f64(m.data()[i]);
+  }
+  const std::string& bytes() const { return bytes_; }
+
+ private:
+  std::string bytes_;
+};
+
+/// Reads what Encoder wrote; any overrun is a malformed record.
+class Decoder {
+ public:
+  explicit Decoder(const std::string& bytes) : bytes_(bytes) {}
+  template <class T>
+  T get() {
+    need(sizeof(T));
+    std::array<char, sizeof(T)> b;
+    std::memcpy(b.data(), bytes_.data() + at_, sizeof(T));
+    if constexpr (std::endian::native == std::endian::big) std::reverse(b.begin(), b.end());
+    at_ += sizeof(T);
+    T value;
+    std::memcpy(&value, b.data(), sizeof(T));
+    return value;
+  }
+  int i32() { return get<std::int32_t>(); }
+  std::int64_t i64() { return get<std::int64_t>(); }
+  double f64() { return get<double>(); }
+  /// A count of items of at least `item_size` bytes each that must fit in what is left.
+  std::size_t count(std::size_t item_size) {
+    const std::uint64_t n = get<std::uint64_t>();
+    if (item_size > 0 && n > (bytes_.size() - at_) / item_size) throw std::runtime_error("a count exceeds the record");
+    return static_cast<std::size_t>(n);
+  }
+  std::string str() {
+    const std::size_t n = count(1);
+    std::string s = bytes_.substr(at_, n);
+    at_ += n;
+    return s;
+  }
+  std::vector<int> ints() {
+    std::vector<int> v(count(4));
+    for (int& x : v) x = i32();
+    return v;
+  }
+  Eigen::MatrixXd matrix() {
+    constexpr std::size_t kMaxSide = std::size_t{1} << 40;  // keeps rows·cols and Eigen::Index far from overflow
+    const std::size_t rows = count(0), cols = count(0);
+    if (rows > kMaxSide || cols > kMaxSide || (rows > 0 && cols > (bytes_.size() - at_) / 8 / rows))
+      throw std::runtime_error("a matrix exceeds the record");
+    Eigen::MatrixXd m(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+    for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = f64();
+    return m;
+  }
+  Eigen::VectorXd vector() {
+    Eigen::MatrixXd m = matrix();
+    if (m.cols() != 1 && m.size() != 0) throw std::runtime_error("a vector has more than one column");
+    return m.reshaped();
+  }
+  void finish() const {
+    if (at_ != bytes_.size()) throw std::runtime_error("trailing bytes after the record's content");
+  }
+
+ private:
+  void need(std::size_t n) const {
+    if (bytes_.size() - at_ < n) throw std::runtime_error("the record ends early");
+  }
+  const std::string& bytes_;
+  std::size_t at_ = 0;
+};
+
+// ---------------------------------------------------------------- records
+
+std::string encode_head(const StoredMap& map) {
+  Encoder e;
+  e.str(map.abi_tag);
+  e.str(map.kind);
+  e.str(map.run);
+  for (int i = 0; i < 6; ++i) e.f64(map.robot_pose[i]);
+  return e.bytes();
+}
+
+std::string encode_types(const StoredMap& map) {
+  Encoder e;
+  e.u64(map.types.size());
+  for (const StoredType& t : map.types) {
+    e.str(t.instance);
+    e.str(t.plugin);
+  }
+  return e.bytes();
+}
+
+std::string encode_feature(const StoredFeature& f) {
+  Encoder e;
+  e.i64(f.id);
+  e.i32(f.type);
+  e.ints(f.state_idx);
+  e.ints(f.own_idx);
+  e.u64(f.shared.size());
+  for (const auto& [block, id] : f.shared) {
+    e.i32(block);
+    e.i32(id);
+  }
+  e.i64(f.created_step);
+  e.i64(f.last_seen_step);
+  e.i32(f.last_sensor);
+  e.f64(f.last_seen_t);
+  e.i32(f.times_matched);
+  const SavedFeature& s = f.saved;
+  e.i32(s.mspace_dim);
+  e.i32(s.version);
+  e.matrix(s.coords);
+  e.matrix(s.extra);
+  e.u64(s.arrays.size());
+  for (const SavedArray& a : s.arrays) {
+    e.str(a.name);
+    e.matrix(a.value);
+  }
+  return e.bytes();
+}
+
+std::string encode_shared(const StoredShared& c) {
+  Encoder e;
+  e.i32(c.id);
+  e.i32(static_cast<int>(c.kind));
+  e.ints(c.state_idx);
+  e.u64(c.members.size());
+  for (const auto& [feature, block] : c.members) {
+    e.i32(feature);
+    e.i32(block);
+  }
+  return e.bytes();
+}
+
+void decode_head(const std::string& payload, StoredMap& map) {
+  Decoder d(payload);
+  map.abi_tag = d.str();
+  map.kind = d.str();
+  map.run = d.str();
+  for (int i = 0; i < 6; ++i) map.robot_pose[i] = d.f64();
+  d.finish();
+}
+
+void decode_types(const std::string& payload, StoredMap& map) {
+  Decoder d(payload);
+  map.types.resize(d.count(16));
+  for (StoredType& t : map.types) {
+    t.instance = d.str();
+    t.plugin = d.str();
+  }
+  d.finish();
+}
+
+StoredFeature decode_feature(const std::string& payload) {
+  Decoder d(payload);
+  StoredFeature f;
+  f.id = d.i64();
+  f.type = d.i32();
+  f.state_idx = d.ints();
+  f.own_idx = d.ints();
+  const std::size_t n_shared = d.count(8);
+  for (std::size_t i = 0; i < n_shared; ++i) {
+    const int block = d.i32();
+    f.shared[block] = d.i32();
+  }
+  f.created_step = d.i64();
+  f.last_seen_step = d.i64();
+  f.last_sensor = d.i32();
+  f.last_seen_t = d.f64();
+  f.times_matched = d.i32();
+  SavedFeature& s = f.saved;
+  s.mspace_dim = d.i32();
+  s.version = d.i32();
+  s.coords = d.vector();
+  s.extra = d.vector();
+  const std::size_t n_arrays = d.count(24);
+  for (std::size_t i = 0; i < n_arrays; ++i) {
+    std::string name = d.str();
+    s.arrays.push_back({std::move(name), d.matrix()});
+  }
+  d.finish();
+  return f;
+}
+
+StoredShared decode_shared(const std::string& payload) {
+  Decoder d(payload);
+  StoredShared c;
+  c.id = d.i32();
+  const int kind = d.i32();
+  if (kind < 0 || kind > static_cast<int>(BlockKind::Scalar)) throw std::runtime_error("unknown block kind");
+  c.kind = static_cast<BlockKind>(kind);
+  c.state_idx = d.ints();
+  c.members.resize(d.count(8));
+  for (auto& [feature, block] : c.members) {
+    feature = d.i32();
+    block = d.i32();
+  }
+  d.finish();
+  return c;
+}
+
+/// The SDK major version in an ABI tag "mspace-sdkN/…"; -1 if there is none.
+int sdk_major_of(const std::string& tag) {
+  constexpr std::string_view prefix = "mspace-sdk";
+  if (tag.compare(0, prefix.size(), prefix) != 0) return -1;
+  int n = 0;
+  std::size_t i = prefix.size();
+  if (i >= tag.size() || tag[i] < '0' || tag[i] > '9') return -1;
+  for (; i < tag.size() && tag[i] >= '0' && tag[i] <= '9' && n < 100000; ++i) n = 10 * n + (tag[i] - '0');
+  return n;
+}
+
+// ---------------------------------------------------------------- file output
+
+/// A temporary file beside the target, renamed over it by commit(); removed
+/// if never committed.
+class AtomicFile {
+ public:
+  explicit AtomicFile(const std::filesystem::path& target) : target_(target) {
+    temp_ = target;
+    temp_ += ".tmp-" + std::to_string(::getpid());
+    file_ = std::fopen(temp_.c_str(), "wb");
+    if (file_ == nullptr)
+      throw PersistenceError(target_, std::string("cannot create a temporary file: ") + std::strerror(errno));
+  }
+  ~AtomicFile() {
+    if (file_ != nullptr) std::fclose(file_);
+    if (!committed_) {
+      std::error_code ignored;
+      std::filesystem::remove(temp_, ignored);
+    }
+  }
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+
+  void write(const void* data, std::size_t size) {
+    if (size > 0 && std::fwrite(data, 1, size, file_) != size)
+      throw PersistenceError(target_, std::string("write failed: ") + std::strerror(errno));
+  }
+  void commit() {
+    const bool flushed = std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
+    const int close_result = std::fclose(file_);
+    file_ = nullptr;
+    if (!flushed || close_result != 0)
+      throw PersistenceError(target_, std::string("write failed: ") + std::strerror(errno));
+    std::error_code ec;
+    std::filesystem::rename(temp_, target_, ec);
+    if (ec) throw PersistenceError(target_, "cannot rename the temporary file into place: " + ec.message());
+    committed_ = true;
+  }
+
+ private:
+  std::filesystem::path target_, temp_;
+  std::FILE* file_ = nullptr;
+  bool committed_ = false;
+};
+
+class RecordWriter {
+ public:
+  explicit RecordWriter(AtomicFile& out) : out_(out) {}
+  void write(std::uint32_t tag, std::int64_t key, std::int32_t aux, const std::string& payload) {
+    Encoder frame;
+    frame.put(tag);
+    frame.put(key);
+    frame.put(aux);
+    frame.put(static_cast<std::uint64_t>(payload.size()));
+    Encoder crcs;
+    crcs.put(crc32(frame.bytes()));
+    out_.write(frame.bytes().data(), frame.bytes().size());
+    out_.write(crcs.bytes().data(), crcs.bytes().size());
+    out_.write(payload.data(), payload.size());
+    Encoder tail;
+    tail.put(crc32(payload));
+    out_.write(tail.bytes().data(), tail.bytes().size());
+    ++records_;
+  }
+  std::uint64_t records() const { return records_; }
+
+ private:
+  AtomicFile& out_;
+  std::uint64_t records_ = 0;
+};
+
+// ---------------------------------------------------------------- file input
+
+struct Record {
+  std::uint32_t tag = 0;
+  std::int64_t key = 0;
+  std::int32_t aux = 0;
+  std::string payload;
+  std::uint64_t offset = 0;  ///< of its frame in the file
+};
+
+class RecordReader {
+ public:
+  RecordReader(const std::filesystem::path& file, std::ifstream& in, std::uint64_t size)
+      : file_(file), in_(in), size_(size) {}
+
+  /// The next record; throws naming the file (and the feature, when the
+  /// frame says which) on truncation or a CRC mismatch.
+  Record next(const std::vector<StoredType>& types) {
+    Record r;
+    r.offset = static_cast<std::uint64_t>(in_.tellg());
+    std::string frame(kFrameSize + 4, '\0');
+    if (!in_.read(frame.data(), static_cast<std::streamsize>(frame.size())))
+      throw PersistenceError(file_, "truncated: the file ends at byte " + std::to_string(size_) +
+                                        " inside the frame of record " + std::to_string(index_) + " (no END record)");
+    const std::string framed = frame.substr(0, kFrameSize);
+    Decoder d(frame);
+    r.tag = d.get<std::uint32_t>();
+    r.key = d.get<std::int64_t>();
+    r.aux = d.get<std::int32_t>();
+    const std::uint64_t length = d.get<std::uint64_t>();
+    if (d.get<std::uint32_t>() != crc32(framed))
+      throw PersistenceError(file_, "corrupt: the frame of record " + std::to_string(index_) + " at byte " +
+                                        std::to_string(r.offset) + " fails its CRC-32");
+    const bool feature = r.tag == kFeat;
+    const std::optional<std::int64_t> id = feature ? std::optional<std::int64_t>(r.key) : std::nullopt;
+    const std::string plugin = feature ? plugin_of(types, r.aux) : std::string();
+    const std::uint64_t at = r.offset + kFrameSize + 4;
+    if (length > size_ - std::min(size_, at) || size_ - at - length < 4)
+      throw PersistenceError(file_,
+                             "truncated: record " + std::to_string(index_) + " (" + tag_name(r.tag) + ") needs " +
+                                 std::to_string(length + 4) + " bytes after byte " + std::to_string(at) +
+                                 ", the file has " + std::to_string(size_),
+                             id, plugin);
+    r.payload.resize(static_cast<std::size_t>(length));
+    std::array<char, 4> crc{};
+    if (!in_.read(r.payload.data(), static_cast<std::streamsize>(length)) || !in_.read(crc.data(), 4))
+      throw PersistenceError(file_, "cannot read record " + std::to_string(index_), id, plugin);
+    const std::string crc_bytes(crc.data(), 4);
+    if (Decoder(crc_bytes).get<std::uint32_t>() != crc32(r.payload))
+      throw PersistenceError(file_,
+                             "corrupt: the content of record " + std::to_string(index_) + " (" + tag_name(r.tag) +
+                                 ") at byte " + std::to_string(r.offset) + " fails its CRC-32",
+                             id, plugin);
+    ++index_;
+    return r;
+  }
+  std::uint64_t index() const { return index_; }
+
+  static std::string plugin_of(const std::vector<StoredType>& types, std::int32_t type) {
+    if (type < 0 || static_cast<std::size_t>(type) >= types.size()) return "?";
+    return types[static_cast<std::size_t>(type)].plugin;
+  }
+
+ private:
+  const std::filesystem::path& file_;
+  std::ifstream& in_;
+  std::uint64_t size_;
+  std::uint64_t index_ = 0;
+};
+
+/// Cross-record checks: type indices, unique ids, shared coordinates' members.
+void check_consistency(const std::filesystem::path& file, const StoredMap& map) {
+  std::set<std::int64_t> ids;
+  for (const StoredFeature& f : map.features) {
+    const std::string plugin = RecordReader::plugin_of(map.types, f.type);
+    if (f.type < 0 || static_cast<std::size_t>(f.type) >= map.types.size())
+      throw PersistenceError(file, "feature type index " + std::to_string(f.type) + " is not in the type table", f.id,
+                             plugin);
+    if (!ids.insert(f.id).second) throw PersistenceError(file, "the feature id appears twice", f.id, plugin);
+    if (f.saved.mspace_dim < 0 ||
+        (f.saved.mspace_dim > 0 && static_cast<int>(f.state_idx.size()) != f.saved.mspace_dim))
+      throw PersistenceError(file,
+                             "the M-space dimension " + std::to_string(f.saved.mspace_dim) + " does not match its " +
+                                 std::to_string(f.state_idx.size()) + " state indices",
+                             f.id, plugin);
+  }
+  std::set<int> shared_ids;
+  for (const StoredShared& c : map.shared) {
+    if (!shared_ids.insert(c.id).second)
+      throw PersistenceError(file, "shared coordinate " + std::to_string(c.id) + " appears twice");
+    for (const auto& [feature, block] : c.members)
+      if (ids.count(feature) == 0)
+        throw PersistenceError(file, "shared coordinate " + std::to_string(c.id) + " names feature " +
+                                         std::to_string(feature) + ", which is not in the file");
+  }
+  for (const StoredFeature& f : map.features)
+    for (const auto& [block, id] : f.shared)
+      if (shared_ids.count(id) == 0)
+        throw PersistenceError(file,
+                               "block " + std::to_string(block) + " is shared with coordinate " + std::to_string(id) +
+                                   ", which is not in the file",
+                               f.id, RecordReader::plugin_of(map.types, f.type));
+}
+
+std::string what_with_context(const std::filesystem::path& file, const std::string& what,
+                              std::optional<std::int64_t> feature_id, const std::string& plugin) {
+  std::string s = "map file '" + file.string() + "'";
+  if (feature_id) s += ", feature " + std::to_string(*feature_id);
+  if (!plugin.empty()) s += " (plugin '" + plugin + "')";
+  return s + ": " + what;
+}
+
+}  // namespace
+
+PersistenceError::PersistenceError(const std::filesystem::path& file, const std::string& what,
+                                   std::optional<std::int64_t> feature_id, const std::string& plugin)
+    : std::runtime_error(what_with_context(file, what, feature_id, plugin)),
+      file_(file),
+      feature_id_(feature_id),
+      plugin_(plugin) {}
+
+StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file) {
+  StoredMap map;
+  map.abi_tag = sdk_abi_tag();
+  map.run = slam.config().name;
+  map.robot_pose = slam.pose();
+  for (const FeatureTypeSlot& t : slam.feature_types()) map.types.push_back({t.instance, t.plugin});
+  for (const MapFeature& mf : slam.features()) {
+    StoredFeature f;
+    f.id = mf.id;
+    f.type = mf.type;
+    f.state_idx = mf.state_idx;
+    f.own_idx = mf.own_idx;
+    f.shared = mf.shared;
+    f.created_step = mf.created_step;
+    f.last_seen_step = mf.last_seen_step;
+    f.last_sensor = mf.last_sensor;
+    f.last_seen_t = mf.last_seen_t;
+    f.times_matched = mf.times_matched;
+    const FeatureTypeSlot& type = slam.feature_types()[static_cast<std::size_t>(mf.type)];
+    try {
+      f.saved = mf.feature->save();
+    } catch (const std::exception& e) {
+      throw PersistenceError(file, std::string("save() failed: ") + e.what(), mf.id, type.plugin);
+    }
+    map.features.push_back(std::move(f));
+  }
+  for (const SharedCoordinate& c : slam.shared_coordinates())
+    map.shared.push_back({c.id, c.kind, c.state_idx, c.members});
+  return map;
+}
+
+void write_map_file(const std::filesystem::path& file, const StoredMap& map) {
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
+  AtomicFile out(file);
+  out.write(kMagic.data(), kMagic.size());
+  Encoder version;
+  version.put(kMapFormatVersion);
+  out.write(version.bytes().data(), version.bytes().size());
+  RecordWriter w(out);
+  w.write(kHead, 0, -1, encode_head(map));
+  w.write(kType, 0, -1, encode_types(map));
+  for (const StoredFeature& f : map.features) w.write(kFeat, f.id, f.type, encode_feature(f));
+  for (const StoredShared& c : map.shared) w.write(kShrd, c.id, -1, encode_shared(c));
+  Encoder end;
+  end.put(w.records());
+  w.write(kEnd, 0, -1, end.bytes());
+  out.commit();
+}
+
+StoredMap read_map_file(const std::filesystem::path& file) {
+  std::error_code ec;
+  const std::uintmax_t size = std::filesystem::file_size(file, ec);
+  if (ec) throw PersistenceError(file, "cannot read: " + ec.message());
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw PersistenceError(file, "cannot open for reading");
+  std::array<char, 8> magic{};
+  std::array<char, 4> version_bytes{};
+  if (!in.read(magic.data(), magic.size()) || magic != kMagic)
+    throw PersistenceError(file, "not an mspace map file (wrong magic number)");
+  if (!in.read(version_bytes.data(), version_bytes.size()))
+    throw PersistenceError(file, "truncated: the file ends before its format version");
+  StoredMap map;
+  map.format_version = Decoder(std::string(version_bytes.data(), 4)).get<std::uint32_t>();
+  if (map.format_version != kMapFormatVersion)
+    throw PersistenceError(file, "format version " + std::to_string(map.format_version) +
+                                     "; this build of mspace reads version " + std::to_string(kMapFormatVersion));
+  RecordReader reader(file, in, static_cast<std::uint64_t>(size));
+  bool head = false, types = false;
+  for (;;) {
+    const std::uint64_t index = reader.index();
+    Record r = reader.next(map.types);
+    const bool feature = r.tag == kFeat;
+    const std::optional<std::int64_t> id = feature ? std::optional<std::int64_t>(r.key) : std::nullopt;
+    const std::string plugin = feature ? RecordReader::plugin_of(map.types, r.aux) : std::string();
+    try {
+      if (index == 0 && r.tag != kHead) throw std::runtime_error("the first record is not HEAD");
+      if (index == 1 && r.tag != kType) throw std::runtime_error("the second record is not TYPE");
+      if (r.tag == kHead) {
+        if (head) throw std::runtime_error("a second HEAD record");
+        decode_head(r.payload, map);
+        head = true;
+        const int major = sdk_major_of(map.abi_tag);
+        if (major != MSPACE_SDK_VERSION_MAJOR)
+          throw PersistenceError(file, "written with SDK ABI '" + map.abi_tag + "' (SDK version " +
+                                           std::to_string(major) + "); this build has '" + sdk_abi_tag() +
+                                           "': the plugins' saved state may differ; re-create the map");
+        if (map.kind != "map") throw std::runtime_error("a '" + map.kind + "' file, not a map");
+      } else if (r.tag == kType) {
+        if (types) throw std::runtime_error("a second TYPE record");
+        decode_types(r.payload, map);
+        types = true;
+      } else if (r.tag == kFeat) {
+        StoredFeature f = decode_feature(r.payload);
+        if (f.id != r.key || f.type != r.aux) throw std::runtime_error("the frame and the content disagree");
+        map.features.push_back(std::move(f));
+      } else if (r.tag == kShrd) {
+        map.shared.push_back(decode_shared(r.payload));
+      } else if (r.tag == kEnd) {
+        std::uint64_t count = 0;
+        {
+          Decoder d(r.payload);
+          count = d.get<std::uint64_t>();
+          d.finish();
+        }
+        if (count != index)
+          throw std::runtime_error("END counts " + std::to_string(count) + " records, the file has " +
+                                   std::to_string(index));
+        if (static_cast<std::uint64_t>(in.tellg()) != size) throw std::runtime_error("bytes after the END record");
+        break;
+      } else {
+        throw std::runtime_error("unknown record tag '" + tag_name(r.tag) + "'");
+      }
+    } catch (const PersistenceError&) {
+      throw;
+    } catch (const std::exception& e) {
+      throw PersistenceError(file,
+                             "malformed record " + std::to_string(index) + " (" + tag_name(r.tag) + ") at byte " +
+                                 std::to_string(r.offset) + ": " + e.what(),
+                             id, plugin);
+    }
+  }
+  check_consistency(file, map);
+  return map;
+}
+
+std::vector<RestoredFeature> restore_features(const StoredMap& map, const std::filesystem::path& file,
+                                              const std::vector<FeatureTypeSlot>& types) {
+  // Which of the run's feature types each type of the file is.
+  std::vector<int> slot_of(map.types.size(), -1);
+  for (std::size_t i = 0; i < map.types.size(); ++i)
+    for (std::size_t j = 0; j < types.size(); ++j)
+      if (types[j].instance == map.types[i].instance && types[j].plugin == map.types[i].plugin && types[j].type)
+        slot_of[i] = static_cast<int>(j);
+  std::vector<RestoredFeature> out;
+  out.reserve(map.features.size());
+  for (const StoredFeature& f : map.features) {
+    const StoredType& stored = map.types.at(static_cast<std::size_t>(f.type));
+    const int slot = slot_of[static_cast<std::size_t>(f.type)];
+    if (slot < 0)
+      throw PersistenceError(file,
+                             "feature type '" + stored.instance + "' of plugin '" + stored.plugin +
+                                 "' is not loaded in this run (is the plugin installed and the type configured?)",
+                             f.id, stored.plugin);
+    const FeatureTypeSlot& type = types[static_cast<std::size_t>(slot)];
+    std::unique_ptr<Feature> feature;
+    try {
+      feature = type.type->restore(f.saved);
+    } catch (const std::exception& e) {
+      throw PersistenceError(file, std::string("restore() refused the saved state: ") + e.what(), f.id, stored.plugin);
+    }
+    if (!feature) throw PersistenceError(file, "restore() returned nothing", f.id, stored.plugin);
+    if (feature->mspace_dim() != f.saved.mspace_dim || feature->coords().size() != f.saved.coords.size())
+      throw PersistenceError(file,
+                             "restore() gave M-space dimension " + std::to_string(feature->mspace_dim()) +
+                                 ", the file says " + std::to_string(f.saved.mspace_dim),
+                             f.id, stored.plugin);
+    auto library = type.library;
+    out.push_back({f.id, slot, std::shared_ptr<Feature>(feature.release(), [library](Feature* p) { delete p; })});
+  }
+  return out;
+}
+
+void write_map_bin(const std::filesystem::path& file, const Slam& slam) {
+  write_map_file(file, snapshot_map(slam, file));
+}
+
+}  // namespace mspace::kernel
