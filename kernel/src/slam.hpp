@@ -22,6 +22,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
+#include "association.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"
 #include "mspace/estimator.hpp"
@@ -89,7 +90,7 @@ struct RunStats {
   std::int64_t pruned = 0;
   std::int64_t unknown_channel_readings = 0;
   double seconds_predict = 0.0;
-  double seconds_associate = 0.0;
+  double seconds_associate = 0.0;  ///< gating, selection and keeping the spatial index in step
   double seconds_update = 0.0;
   double seconds_dense = 0.0;
   double seconds_extend = 0.0;
@@ -132,13 +133,13 @@ class Slam {
   /// Current value of a shared coordinate (from its first member).
   Eigen::VectorXd shared_value(const SharedCoordinate& c) const;
   const RunStats& stats() const { return stats_; }
+  const AssociationStats& association_stats() const { return associator_.stats(); }
   std::size_t size_hint() const;
   Eigen::MatrixXd true_landmarks() const;
   /// Malformed records the data source skipped.
   std::size_t skipped_records() const;
 
  private:
-  struct Candidate;
   struct Match;
   struct ReadingWork;
 
@@ -148,6 +149,8 @@ class Slam {
   void process_sensor_reading(const SensorReading& reading, int sensor_index, std::vector<ReadingWork>& work);
   void associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
                  ReadingWork& work);
+  /// Brings the associator's spatial index in step with features_.
+  void sync_association_index();
   void update(std::vector<Match>& matches);
   void add_dense_information(std::vector<ReadingWork>& work);
   void extend(const std::vector<int>& touched);
@@ -180,12 +183,7 @@ class Slam {
   double path_distance_ = 0.0;
   std::int64_t step_ = 0;
   int next_feature_id_ = 1;
-  std::vector<double> gate_chi2_;      ///< by innovation dimension
-  std::vector<double> new_feature_chi2_;
-  // Reused by associate() for every (feature, measurement) pair.
-  Innovation scratch_innovation_;
-  Eigen::MatrixXd scratch_C_eta_, scratch_S_;
-  Eigen::LDLT<Eigen::MatrixXd> scratch_ldlt_;
+  Associator associator_;  ///< gating, nearest neighbour / JCBB, the spatial index
   std::vector<StampedPose> trajectory_;
   std::vector<StampedPose> ground_truth_;
   std::vector<StampedPose> evaluated_;
