@@ -73,7 +73,7 @@ class InterpretationTree {
  public:
   InterpretationTree(const std::vector<Candidate>& candidates, const MarginalFn& marginal,
                      const JcbbOptions& options)
-      : cands_(candidates), options_(options) {
+      : cands_(candidates), options_(options), chi2_(options.chi2_cache != nullptr ? *options.chi2_cache : own_chi2_) {
     // Levels: measurements in ascending order, candidates by d² within each.
     std::vector<int> order;
     for (std::size_t i = 0; i < cands_.size(); ++i)
@@ -223,7 +223,8 @@ class InterpretationTree {
   Eigen::MatrixXd Z_, L_, B_;
   Eigen::VectorXd y_;
   std::vector<bool> feature_used_;
-  std::vector<double> chi2_;
+  std::vector<double> own_chi2_;
+  std::vector<double>& chi2_;
   std::vector<int> hypothesis_, best_;
   int best_pairings_ = -1;
   double best_d2_ = kInf;
@@ -400,28 +401,63 @@ double Associator::threshold(std::vector<double>& cache, double p, int dim) {
   return cache[dim];
 }
 
+namespace {
+
+/// Whether `outer` holds all of `inner`.
+bool holds(const PlanarBox& outer, const PlanarBox& inner) {
+  if (outer.everywhere) return inner.everywhere;
+  return !inner.everywhere && inner.min_x >= outer.min_x && inner.max_x <= outer.max_x &&
+         inner.min_y >= outer.min_y && inner.max_y <= outer.max_y;
+}
+
+PlanarBox grown(PlanarBox b, double margin) {
+  if (b.everywhere) return b;
+  b.min_x -= margin;
+  b.min_y -= margin;
+  b.max_x += margin;
+  b.max_y += margin;
+  return b;
+}
+
+}  // namespace
+
 void Associator::sync(const std::vector<MapFeature>& features) {
   if (!config_.spatial_index) return;
-  bool removed = position_.size() > features.size();
+  const double margin = 0.05 * grid_.cell_size();
+  bool same_features = slots_.size() == features.size();
+  for (std::size_t i = 0; i < features.size() && same_features; ++i) same_features = slots_[i].id == features[i].id;
+  if (same_features) {  // the common case: features moved (an update)
+    for (std::size_t i = 0; i < features.size(); ++i) {
+      const PlanarBox box = planar_box(*features[i].feature);
+      if (holds(slots_[i].loose, box)) continue;
+      slots_[i].loose = grown(box, margin);
+      grid_.set(slots_[i].id, slots_[i].loose);
+    }
+    synced_ = true;
+    return;
+  }
+  // Features were created or removed: carry the slots over by id.
+  std::unordered_map<int, PlanarBox> old;
+  old.reserve(slots_.size());
+  for (const Slot& slot : slots_) old.emplace(slot.id, slot.loose);
+  slots_.resize(features.size());
+  position_.clear();
+  position_.reserve(features.size());
   for (std::size_t i = 0; i < features.size(); ++i) {
-    const MapFeature& mf = features[i];
-    const auto [it, inserted] = position_.try_emplace(mf.id, static_cast<int>(i));
-    if (!inserted && it->second != static_cast<int>(i)) {
-      it->second = static_cast<int>(i);
-      removed = true;  // a feature before it went away
+    const int id = features[i].id;
+    const PlanarBox box = planar_box(*features[i].feature);
+    const auto it = old.find(id);
+    slots_[i].id = id;
+    position_[id] = static_cast<int>(i);
+    if (it != old.end()) {
+      slots_[i].loose = it->second;
+      old.erase(it);
+      if (holds(slots_[i].loose, box)) continue;
     }
-    grid_.set(mf.id, planar_box(*mf.feature));
+    slots_[i].loose = grown(box, margin);
+    grid_.set(id, slots_[i].loose);
   }
-  if (removed || position_.size() != features.size()) {
-    std::vector<int> gone;
-    for (const auto& [id, pos] : position_)
-      if (pos >= static_cast<int>(features.size()) || features[pos].id != id) gone.push_back(id);
-    for (int id : gone) {
-      position_.erase(id);
-      grid_.erase(id);
-    }
-  }
-  synced_size_ = features.size();
+  for (const auto& [id, box] : old) grid_.erase(id);  // removed from the map
   synced_ = true;
 }
 
@@ -444,7 +480,7 @@ void Associator::features_in_range(const AssociationView& map, const SensorSlot&
   ++stats_.index_queries;
   // The index is kept in step by sync(); a map whose size changed since is
   // synced here, and a key whose position is stale forces a sync too.
-  if (!synced_ || synced_size_ != map.features.size()) sync(map.features);
+  if (!synced_ || slots_.size() != map.features.size()) sync(map.features);
   for (int attempt = 0; attempt < 2; ++attempt) {
     keys_.clear();
     grid_.query(p, range, keys_);
@@ -565,7 +601,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   if (joint) {
     ++stats_.jcbb_readings;
     const MarginalFn marginal = [&](const std::vector<int>& rows) { return map.estimator.marginal(rows); };
-    const JcbbResult jc = joint_compatibility(candidates, marginal, {ac.gate_probability, ac.jcbb_max_nodes});
+    const JcbbResult jc = joint_compatibility(candidates, marginal, {ac.gate_probability, ac.jcbb_max_nodes, &joint_chi2_});
     stats_.jcbb_nodes += jc.nodes;
     if (jc.bounded) {
       ++stats_.jcbb_bounded;

@@ -65,6 +65,9 @@ std::vector<int> nearest_neighbour(std::vector<Candidate>& candidates, int num_m
 struct JcbbOptions {
   double probability = 0.99;       ///< joint compatibility: D² ≤ χ²(probability, dim of the joint innovation)
   std::int64_t max_nodes = 100000;  ///< interpretation-tree nodes before giving up
+  /// χ² quantiles of `probability` by dimension (< 0: not computed yet),
+  /// kept from reading to reading by the caller; null: a fresh cache.
+  std::vector<double>* chi2_cache = nullptr;
 };
 
 struct JcbbResult {
@@ -192,9 +195,17 @@ class Associator {
   AssociationStats stats_;
   std::vector<double> gate_chi2_;  ///< by innovation dimension
   std::vector<double> new_feature_chi2_;
+  std::vector<double> joint_chi2_;  ///< by joint innovation dimension
+  /// What the index holds of the feature at one position of the map: its
+  /// box grown by a margin, so that the small moves of an update leave the
+  /// grid alone (a query returns a superset; planar_distance decides).
+  struct Slot {
+    int id = 0;
+    PlanarBox loose;
+  };
   PlanarGrid grid_;
-  std::unordered_map<int, int> position_;  ///< feature id → index in the map, as of the last sync
-  std::size_t synced_size_ = 0;
+  std::vector<Slot> slots_;               ///< by position in the map, as of the last sync
+  std::unordered_map<int, int> position_;  ///< feature id → position, as of the last sync
   bool synced_ = false;
   std::vector<int> in_range_, keys_;
   // Reused for every (feature, measurement) pair.
