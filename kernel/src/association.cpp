@@ -390,8 +390,22 @@ void PlanarGrid::query(const Eigen::Vector2d& p, double range, std::vector<int>&
 
 // ---- The associator ---------------------------------------------------------
 
-Associator::Associator(const AssociationConfig& config, std::shared_ptr<Logger> log)
-    : config_(config), log_(std::move(log)), grid_(config.index_cell_size) {}
+namespace {
+
+/// The configured cell size, or the largest max_range of the sensors (a query
+/// then covers at most 4 × 4 cells), or 10 m.
+double cell_size(const AssociationConfig& config, const std::vector<SensorConfig>& sensors) {
+  if (config.index_cell_size > 0.0) return config.index_cell_size;
+  double largest = 0.0;
+  for (const SensorConfig& s : sensors) largest = std::max(largest, s.max_range);
+  return largest > 0.0 ? largest : 10.0;
+}
+
+}  // namespace
+
+Associator::Associator(const AssociationConfig& config, const std::vector<SensorConfig>& sensors,
+                       std::shared_ptr<Logger> log)
+    : config_(config), log_(std::move(log)), grid_(cell_size(config, sensors)) {}
 
 Associator::~Associator() = default;
 
@@ -433,7 +447,7 @@ void Associator::sync(const std::vector<MapFeature>& features) {
       slots_[i].loose = grown(box, margin);
       grid_.set(slots_[i].id, slots_[i].loose);
     }
-    synced_ = true;
+    dirty_ = false;
     return;
   }
   // Features were created or removed: carry the slots over by id.
@@ -458,7 +472,7 @@ void Associator::sync(const std::vector<MapFeature>& features) {
     grid_.set(id, slots_[i].loose);
   }
   for (const auto& [id, box] : old) grid_.erase(id);  // removed from the map
-  synced_ = true;
+  dirty_ = false;
 }
 
 void Associator::features_in_range(const AssociationView& map, const SensorSlot& sensor, const Eigen::Vector2d& p,
@@ -478,9 +492,9 @@ void Associator::features_in_range(const AssociationView& map, const SensorSlot&
     return;
   }
   ++stats_.index_queries;
-  // The index is kept in step by sync(); a map whose size changed since is
-  // synced here, and a key whose position is stale forces a sync too.
-  if (!synced_ || slots_.size() != map.features.size()) sync(map.features);
+  // The index is brought up to date after map_changed() or when the number
+  // of features changed; a key whose position is stale forces a sync too.
+  if (dirty_ || slots_.size() != map.features.size()) sync(map.features);
   for (int attempt = 0; attempt < 2; ++attempt) {
     keys_.clear();
     grid_.query(p, range, keys_);

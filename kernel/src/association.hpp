@@ -167,14 +167,21 @@ struct AssociationStats {
 
 class Associator {
  public:
-  Associator(const AssociationConfig& config, std::shared_ptr<Logger> log);
+  /// `sensors` give the grid's cell size when config.index_cell_size is 0.
+  Associator(const AssociationConfig& config, const std::vector<SensorConfig>& sensors, std::shared_ptr<Logger> log);
   ~Associator();
   Associator(const Associator&) = delete;
   Associator& operator=(const Associator&) = delete;
 
-  /// Brings the spatial index up to date with the map: call after anything
-  /// that moves, creates or removes features (updates, dense information,
-  /// extension, joins, pruning). Features are keyed by id.
+  /// Tells the associator that features moved, were created or removed
+  /// (an update, dense information, extension, joins, pruning): the next
+  /// associate() that uses the spatial index brings it up to date first.
+  /// A change in the number of features is noticed without it.
+  void map_changed() { dirty_ = true; }
+
+  /// Brings the spatial index up to date with the map now. Features are
+  /// keyed by id; a feature whose box has not left its indexed box (grown by
+  /// 5% of a cell) costs one planar_box().
   void sync(const std::vector<MapFeature>& features);
 
   /// Associates the measurements of one reading of `sensor` at sensor pose
@@ -206,7 +213,7 @@ class Associator {
   PlanarGrid grid_;
   std::vector<Slot> slots_;               ///< by position in the map, as of the last sync
   std::unordered_map<int, int> position_;  ///< feature id → position, as of the last sync
-  bool synced_ = false;
+  bool dirty_ = true;
   std::vector<int> in_range_, keys_;
   // Reused for every (feature, measurement) pair.
   Innovation scratch_innovation_;

@@ -437,10 +437,7 @@ AssociationConfig Reader::read_association(const Item* item) const {
   }
   if (const Item* f = find(fields, "jcbb_max_nodes")) association.jcbb_max_nodes = integer(*f, 1);
   if (const Item* f = find(fields, "spatial_index")) association.spatial_index = boolean(*f);
-  if (const Item* f = find(fields, "index_cell_size")) {
-    association.index_cell_size = number(*f, 0.0);
-    if (!(association.index_cell_size > 0.0)) fail(*f, "the cell size must be positive");
-  }
+  if (const Item* f = find(fields, "index_cell_size")) association.index_cell_size = number(*f, 0.0);
   return association;
 }
 

@@ -17,7 +17,7 @@
 //   association:  {gate_probability: 0.99, new_feature_probability: 0.9999, tentative_max_age: 20,
 //                  join_distance: 0 (m; 0 = no shared coordinates),
 //                  method: nearest_neighbour | jcbb, jcbb_max_nodes: 100000,
-//                  spatial_index: true, index_cell_size: 10 (m)}
+//                  spatial_index: true, index_cell_size: 0 (m; 0 = the largest sensor max_range)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
 //   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000}
 //   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>}
@@ -85,7 +85,7 @@ struct AssociationConfig {
   /// the features' planar bounding boxes instead of scanning the whole map
   /// (same result); false scans everything.
   bool spatial_index = true;
-  double index_cell_size = 10.0;  ///< m, the grid's cell side
+  double index_cell_size = 0.0;  ///< m, the grid's cell side; 0 = the largest sensors.<name>.max_range
 };
 
 /// "nearest_neighbour" or "jcbb".

@@ -85,7 +85,7 @@ struct Slam::ReadingWork {
 };
 
 Slam::Slam(const RunConfig& config, PluginRegistry& registry)
-    : config_(config), log_(make_instance_logger("slam")), associator_(config.association, log_) {
+    : config_(config), log_(make_instance_logger("slam")), associator_(config.association, config.sensors, log_) {
   auto make = [&](const InstanceConfig& inst, PluginKind kind, auto* tag,
                   std::shared_ptr<const LoadedPlugin>& lib) {
     using T = std::remove_pointer_t<decltype(tag)>;
@@ -210,7 +210,7 @@ bool Slam::step() {
   if (config_.association.join_distance > 0.0) join_shared_coordinates(touched);
   prune_tentative();
   stats_.seconds_extend += seconds_since(t0);
-  sync_association_index();  // features were created, extended, joined, pruned
+  if (!work.empty()) associator_.map_changed();  // features were created, extended, joined
 
   record(data);
   return true;
@@ -318,7 +318,7 @@ void Slam::process_sensor_reading(const SensorReading& reading, int sensor_index
   t0 = Clock::now();
   update(w.matches);
   stats_.seconds_update += seconds_since(t0);
-  if (!w.matches.empty()) sync_association_index();  // the update moved features
+  if (!w.matches.empty()) associator_.map_changed();  // the update moved features
   work.push_back(std::move(w));
 }
 
@@ -341,15 +341,6 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
   }
   stats_.matched += static_cast<std::int64_t>(work.matches.size());
   work.may_create = std::move(result.may_create);
-}
-
-void Slam::sync_association_index() {
-  const bool ranged = std::any_of(sensors_.begin(), sensors_.end(),
-                                  [](const SensorSlot& s) { return s.config.max_range > 0.0; });
-  if (!ranged || !config_.association.spatial_index) return;
-  const auto t0 = Clock::now();
-  associator_.sync(features_);
-  stats_.seconds_associate += seconds_since(t0);
 }
 
 // ---- Phase 2: update -------------------------------------------------------

@@ -149,8 +149,6 @@ class Slam {
   void process_sensor_reading(const SensorReading& reading, int sensor_index, std::vector<ReadingWork>& work);
   void associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
                  ReadingWork& work);
-  /// Brings the associator's spatial index in step with features_.
-  void sync_association_index();
   void update(std::vector<Match>& matches);
   void add_dense_information(std::vector<ReadingWork>& work);
   void extend(const std::vector<int>& touched);

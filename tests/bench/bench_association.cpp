@@ -195,7 +195,7 @@ void associate_reading(benchmark::State& state, bool indexed) {
   Scene scene(n);
   AssociationConfig config;
   config.spatial_index = indexed;
-  Associator associator(config, scene.log);
+  Associator associator(config, {scene.sensor.config}, scene.log);
   associator.sync(scene.features);
   const AssociationView map{scene.features, scene.types, scene.estimator, scene.robot_idx, 0};
   std::size_t matched = 0;
@@ -218,7 +218,7 @@ void BM_SyncAfterUpdate(benchmark::State& state) {
   const int n = static_cast<int>(state.range(0));
   Scene scene(n);
   AssociationConfig config;
-  Associator associator(config, scene.log);
+  Associator associator(config, {scene.sensor.config}, scene.log);
   associator.sync(scene.features);
   Eigen::VectorXd dx = Eigen::Vector3d(0.01, -0.01, 0.0);
   for (auto _ : state) {

@@ -272,8 +272,8 @@ TEST(Config, AssociationMethodAndIndexKeys) {
             "test.yaml:22:19: association.jcbb_max_nodes: 0 is out of range [1, inf]");
   EXPECT_EQ(config_error(kBase + "association:\n  spatial_index: sometimes\n"),
             "test.yaml:22:18: association.spatial_index: expected true or false, got 'sometimes'");
-  EXPECT_EQ(config_error(kBase + "association:\n  index_cell_size: 0\n"),
-            "test.yaml:22:20: association.index_cell_size: the cell size must be positive");
+  EXPECT_EQ(config_error(kBase + "association:\n  index_cell_size: -1\n"),
+            "test.yaml:22:20: association.index_cell_size: -1 is out of range [0, inf]");
   const RunConfig defaults = parse(kBase);
   EXPECT_EQ(defaults.association.method, mspace::kernel::AssociationConfig::Method::NearestNeighbour);
   EXPECT_TRUE(defaults.association.spatial_index);
