@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <random>
 #include <set>
@@ -189,7 +190,10 @@ association: {tentative_max_age: 10, join_distance: 0.3}
 // The Intel Research Lab with the laser's association range set to 10 m.
 TEST_F(IndexRun, IntelLabIdenticalWithAndWithoutIndex) {
   const std::filesystem::path data = kSource.parent_path() / "shared" / "datasets" / "intel_lab";
-  if (!std::filesystem::exists(data)) GTEST_SKIP() << "Intel Research Lab data not found in " << data;
+  if (!std::filesystem::is_regular_file(data / "intel_910_scans.txt") ||
+      !std::filesystem::is_regular_file(data / "intel.relations"))
+    GTEST_SKIP() << "Intel Research Lab data not found in " << data;
+  setenv("MSPACE_DATA", data.parent_path().c_str(), /*overwrite=*/0);
   RunConfig c = load_config(kSource / "config" / "intel_walls.yaml", registry_);
   for (SensorConfig& s : c.sensors) s.max_range = 10.0;
   c.max_steps = 400;
