@@ -200,6 +200,25 @@ TEST_F(IndexRun, IntelLabIdenticalWithAndWithoutIndex) {
   expect_identical_with_and_without_index(c);
 }
 
+// A node bound of 1 stops every search that has a candidate: each such
+// reading falls back to nearest neighbour, is counted, and the run is the
+// nearest-neighbour run.
+TEST_F(IndexRun, JointCompatibilityAtItsNodeBoundFallsBackToNearestNeighbour) {
+  RunConfig c = load_config(kSource / "config" / "sim_points.yaml", registry_);
+  c.max_steps = 1500;
+  const Outcome greedy = run(c);
+  c.association.method = AssociationConfig::Method::Jcbb;
+  c.association.jcbb_max_nodes = 1;
+  const Outcome bounded = run(c);
+  EXPECT_EQ(greedy.association.jcbb_readings, 0);
+  EXPECT_EQ(bounded.association.jcbb_readings, greedy.stats.readings);
+  EXPECT_GT(bounded.association.jcbb_bounded, bounded.association.jcbb_readings / 2);
+  EXPECT_EQ(bounded.stats.matched, greedy.stats.matched);
+  ASSERT_EQ(bounded.trajectory.size(), greedy.trajectory.size());
+  for (std::size_t i = 0; i < greedy.trajectory.size(); ++i)
+    ASSERT_EQ(bounded.trajectory[i].pose, greedy.trajectory[i].pose) << "pose " << i;
+}
+
 // JCBB through the kernel on the simulated world: it runs within its node
 // bound and keeps the accuracy of the default run (ATE bound of tests/run).
 TEST_F(IndexRun, JointCompatibilityOnTheSimulatedWorld) {
