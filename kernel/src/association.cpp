@@ -5,6 +5,7 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include <Eigen/Cholesky>
@@ -88,6 +89,14 @@ class InterpretationTree {
       levels_.back().push_back(c);
     }
     if (order.empty()) return;
+    for (int c : order)
+      if (cands_[c].idx.size() != static_cast<std::size_t>(cands_[c].J_state.cols()) ||
+          cands_[c].J_state.rows() != cands_[c].innovation.eta.size())
+        throw std::invalid_argument("joint_compatibility: a candidate's J_state is " +
+                                    std::to_string(cands_[c].J_state.rows()) + "x" +
+                                    std::to_string(cands_[c].J_state.cols()) + " for " +
+                                    std::to_string(cands_[c].innovation.eta.size()) + " rows and " +
+                                    std::to_string(cands_[c].idx.size()) + " state indices");
 
     // The union of the candidates' state indices and the covariance over it.
     std::vector<int> all;

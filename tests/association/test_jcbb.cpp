@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <stdexcept>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -141,6 +142,14 @@ TEST(Jcbb, RejectsAJointlyIncompatibleSetOfIndividuallyCompatiblePairs) {
   std::vector<Candidate> same = {w.candidate(0, 0, {0.8, 0.0}), w.candidate(1, 1, {0.8, 0.05})};
   const JcbbResult both = joint_compatibility(same, w.marginal(), {0.99, 1000});
   EXPECT_EQ(both.chosen.size(), 2u);
+}
+
+// A candidate whose J_state does not match its state indices is refused.
+TEST(Jcbb, RefusesACandidateWithoutItsStateIndices) {
+  const World w(1, 1.0, 0.01);
+  std::vector<Candidate> cands = {w.candidate(0, 0, {0.1, 0.0})};
+  cands[0].idx.clear();
+  EXPECT_THROW(joint_compatibility(cands, w.marginal(), {0.99, 1000}), std::invalid_argument);
 }
 
 // Tentative candidates (features not in the estimator) take no part.
