@@ -444,43 +444,82 @@ PlanarBox grown(PlanarBox b, double margin) {
 
 }  // namespace
 
+PlanarBox Associator::box_of(Slot& slot, const Feature& f) {
+  const Eigen::VectorXd& x = f.coords();
+  if (slot.coords_size != x.size()) {  // first look (or the coordinates changed shape): read the layout
+    const CoordLayout& layout = f.layout();
+    slot.coords_size = x.size();
+    slot.points = 0;
+    for (int b = 0; b < layout.num_blocks() && slot.points >= 0; ++b) {
+      if (layout.kind(b) == BlockKind::Scalar) continue;
+      if (slot.points == static_cast<int>(slot.point_offsets.size())) {
+        slot.points = -1;
+        break;
+      }
+      slot.point_offsets[static_cast<std::size_t>(slot.points++)] = layout.offset(b);
+    }
+  }
+  if (slot.points < 0) return planar_box(f);
+  if (slot.points == 0) return PlanarBox{0.0, 0.0, 0.0, 0.0, true};
+  PlanarBox box{kInf, kInf, -kInf, -kInf, false};
+  for (int i = 0; i < slot.points; ++i) {
+    const double px = x[slot.point_offsets[static_cast<std::size_t>(i)]];
+    const double py = x[slot.point_offsets[static_cast<std::size_t>(i)] + 1];
+    if (!std::isfinite(px) || !std::isfinite(py)) return PlanarBox{0.0, 0.0, 0.0, 0.0, true};
+    box.min_x = std::min(box.min_x, px);
+    box.min_y = std::min(box.min_y, py);
+    box.max_x = std::max(box.max_x, px);
+    box.max_y = std::max(box.max_y, py);
+  }
+  return box;
+}
+
 void Associator::sync(const std::vector<MapFeature>& features) {
   if (!config_.spatial_index) return;
   const double margin = 0.05 * grid_.cell_size();
-  bool same_features = slots_.size() == features.size();
-  for (std::size_t i = 0; i < features.size() && same_features; ++i) same_features = slots_[i].id == features[i].id;
-  if (same_features) {  // the common case: features moved (an update)
+  if (slots_.size() == features.size()) {  // the common case: features moved (an update)
+    bool same_features = true;
     for (std::size_t i = 0; i < features.size(); ++i) {
-      const PlanarBox box = planar_box(*features[i].feature);
-      if (holds(slots_[i].loose, box)) continue;
-      slots_[i].loose = grown(box, margin);
-      grid_.set(slots_[i].id, slots_[i].loose);
+      Slot& slot = slots_[i];
+      if (slot.id != features[i].id) {
+        same_features = false;
+        break;
+      }
+      const PlanarBox box = box_of(slot, *features[i].feature);
+      if (holds(slot.loose, box)) continue;
+      slot.loose = grown(box, margin);
+      grid_.set(slot.id, slot.loose);
     }
-    dirty_ = false;
-    return;
+    if (same_features) {
+      dirty_ = false;
+      return;
+    }
   }
   // Features were created or removed: carry the slots over by id.
-  std::unordered_map<int, PlanarBox> old;
+  std::unordered_map<int, Slot> old;
   old.reserve(slots_.size());
-  for (const Slot& slot : slots_) old.emplace(slot.id, slot.loose);
+  for (const Slot& slot : slots_) old.emplace(slot.id, slot);
   slots_.resize(features.size());
   position_.clear();
   position_.reserve(features.size());
   for (std::size_t i = 0; i < features.size(); ++i) {
     const int id = features[i].id;
-    const PlanarBox box = planar_box(*features[i].feature);
-    const auto it = old.find(id);
-    slots_[i].id = id;
     position_[id] = static_cast<int>(i);
-    if (it != old.end()) {
-      slots_[i].loose = it->second;
+    const auto it = old.find(id);
+    const bool indexed = it != old.end();
+    if (indexed) {
+      slots_[i] = it->second;
       old.erase(it);
-      if (holds(slots_[i].loose, box)) continue;
+    } else {
+      slots_[i] = Slot{};
+      slots_[i].id = id;
     }
+    const PlanarBox box = box_of(slots_[i], *features[i].feature);
+    if (indexed && holds(slots_[i].loose, box)) continue;
     slots_[i].loose = grown(box, margin);
     grid_.set(id, slots_[i].loose);
   }
-  for (const auto& [id, box] : old) grid_.erase(id);  // removed from the map
+  for (const auto& [id, slot] : old) grid_.erase(id);  // removed from the map
   dirty_ = false;
 }
 

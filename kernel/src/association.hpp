@@ -16,6 +16,7 @@
 // cases (tests/association); the Associator runs the whole of it on the map.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -209,7 +210,14 @@ class Associator {
   struct Slot {
     int id = 0;
     PlanarBox loose;
+    /// Offsets of the feature's point blocks in its coordinates (its
+    /// layout's, read once); points < 0: more than fit, ask planar_box().
+    std::array<int, 4> point_offsets{};
+    int points = -1;
+    Eigen::Index coords_size = -1;
   };
+  /// The feature's planar box, from the slot's cached point offsets.
+  static PlanarBox box_of(Slot& slot, const Feature& f);
   PlanarGrid grid_;
   std::vector<Slot> slots_;               ///< by position in the map, as of the last sync
   std::unordered_map<int, int> position_;  ///< feature id → position, as of the last sync
