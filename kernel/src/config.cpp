@@ -32,7 +32,9 @@ const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt
 const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "plugin_path", "seed"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
-                                                   "join_distance"};
+                                                   "join_distance", "method", "jcbb_max_nodes", "spatial_index",
+                                                   "index_cell_size"};
+const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir", "trajectory", "map", "summary", "picture", "picture_size"};
 
@@ -425,6 +427,18 @@ AssociationConfig Reader::read_association(const Item* item) const {
   if (const Item* f = find(fields, "tentative_max_age"))
     association.tentative_max_age = static_cast<int>(integer(*f, 1, std::numeric_limits<int>::max()));
   if (const Item* f = find(fields, "join_distance")) association.join_distance = number(*f, 0.0);
+  if (const Item* f = find(fields, "method")) {
+    const std::string method = text(*f);
+    if (method == "nearest_neighbour")
+      association.method = AssociationConfig::Method::NearestNeighbour;
+    else if (method == "jcbb")
+      association.method = AssociationConfig::Method::Jcbb;
+    else
+      fail(*f, "'" + method + "' is not one of: " + join(kAssociationMethods));
+  }
+  if (const Item* f = find(fields, "jcbb_max_nodes")) association.jcbb_max_nodes = integer(*f, 1);
+  if (const Item* f = find(fields, "spatial_index")) association.spatial_index = boolean(*f);
+  if (const Item* f = find(fields, "index_cell_size")) association.index_cell_size = number(*f, 0.0);
   return association;
 }
 
@@ -578,6 +592,10 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "new_feature_probability" << YAML::Value << format_number(c.association.new_feature_probability);
   out << YAML::Key << "tentative_max_age" << YAML::Value << std::to_string(c.association.tentative_max_age);
   out << YAML::Key << "join_distance" << YAML::Value << format_number(c.association.join_distance);
+  out << YAML::Key << "method" << YAML::Value << association_method_name(c.association.method);
+  out << YAML::Key << "jcbb_max_nodes" << YAML::Value << std::to_string(c.association.jcbb_max_nodes);
+  out << YAML::Key << "spatial_index" << YAML::Value << yes_no(c.association.spatial_index);
+  out << YAML::Key << "index_cell_size" << YAML::Value << format_number(c.association.index_cell_size);
   out << YAML::EndMap;
 
   out << YAML::Key << "initial_pose" << YAML::Value << YAML::BeginMap;
@@ -609,6 +627,10 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
 }
 
 }  // namespace
+
+const char* association_method_name(AssociationConfig::Method method) {
+  return method == AssociationConfig::Method::Jcbb ? "jcbb" : "nearest_neighbour";
+}
 
 std::string expand_env_vars(const std::string& text) {
   std::string out;

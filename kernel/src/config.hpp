@@ -16,7 +16,9 @@
 //       max_range: 0 (m; features farther away are not associated; 0 = no limit)
 //       silent_readings: 200 (warn when this many readings gave no measurement or no match; 0 = never)
 //   association:  {gate_probability: 0.99, new_feature_probability: 0.9999, tentative_max_age: 20,
-//                  join_distance: 0 (m; 0 = no shared coordinates)}
+//                  join_distance: 0 (m; 0 = no shared coordinates),
+//                  method: nearest_neighbour | jcbb, jcbb_max_nodes: 100000,
+//                  spatial_index: true, index_cell_size: 0 (m; 0 = the largest sensor max_range)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
 //   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000}
 //   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>}
@@ -76,7 +78,22 @@ struct AssociationConfig {
   /// Shared coordinates (T-RO §VI): blocks of two features closer than this
   /// (m) may be merged into one shared coordinate; 0 turns sharing off.
   double join_distance = 0.0;
+  /// How the gated candidates of one reading become matches: greedy nearest
+  /// neighbour, or joint compatibility branch and bound (Neira & Tardós 2001).
+  enum class Method { NearestNeighbour, Jcbb };
+  Method method = Method::NearestNeighbour;
+  /// JCBB visits at most this many interpretation-tree nodes per reading,
+  /// then falls back to nearest neighbour (counted in the summary).
+  std::int64_t jcbb_max_nodes = 100000;
+  /// Sensors with a max_range look their features up in a uniform grid over
+  /// the features' planar bounding boxes instead of scanning the whole map
+  /// (same result); false scans everything.
+  bool spatial_index = true;
+  double index_cell_size = 0.0;  ///< m, the grid's cell side; 0 = the largest sensors.<name>.max_range
 };
+
+/// "nearest_neighbour" or "jcbb".
+const char* association_method_name(AssociationConfig::Method method);
 
 /// Extra references a run is scored against (in the summary).
 struct EvaluationConfig {

@@ -213,6 +213,14 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "readings_without_sensor" << YAML::Value << st.unknown_channel_readings;
   y << YAML::Key << "skipped_input_records" << YAML::Value << s.skipped_records;
   y << YAML::EndMap;
+  const AssociationStats& as = slam.association_stats();
+  y << YAML::Key << "association" << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "method" << YAML::Value << association_method_name(slam.config().association.method);
+  y << YAML::Key << "index_queries" << YAML::Value << as.index_queries;
+  y << YAML::Key << "jcbb_readings" << YAML::Value << as.jcbb_readings;
+  y << YAML::Key << "jcbb_nodes" << YAML::Value << as.jcbb_nodes;
+  y << YAML::Key << "jcbb_bounded" << YAML::Value << as.jcbb_bounded;
+  y << YAML::EndMap;
   y << YAML::Key << "features" << YAML::Value << YAML::BeginMap;
   for (const auto& [type, by_dim] : s.features_by_dim) {
     y << YAML::Key << type << YAML::Value << YAML::BeginMap;
@@ -303,6 +311,10 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
      << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned;
   if (st.joined > 0) os << ", shared coordinates " << st.joined;
   os << "\n";
+  const AssociationStats& as = slam.association_stats();
+  if (as.jcbb_readings > 0)
+    os << "  joint compatibility: " << as.jcbb_readings << " readings, " << as.jcbb_nodes << " tree nodes, "
+       << as.jcbb_bounded << " gave up at jcbb_max_nodes (nearest neighbour used)\n";
   os << "  state dimension " << s.state_dimension << "\n";
   for (const auto& [type, by_dim] : s.features_by_dim) {
     os << "  features '" << type << "':";

@@ -63,30 +63,6 @@ void require_finite(const Eigen::MatrixXd& m, const char* what, const std::strin
   throw PluginError(os.str());
 }
 
-/// Horizontal distance from p to the nearest point of the polyline through
-/// the feature's point blocks (a point, a segment, …); 0 without any.
-double planar_distance(const Feature& f, const Eigen::Vector2d& p) {
-  const CoordLayout& layout = f.layout();
-  double best = std::numeric_limits<double>::infinity();
-  bool any = false;
-  Eigen::Vector2d previous;
-  for (int b = 0; b < layout.num_blocks(); ++b) {
-    if (layout.kind(b) == BlockKind::Scalar) continue;
-    const Eigen::Vector2d q = f.coords().segment<2>(layout.offset(b));
-    if (!any) {
-      best = (q - p).norm();
-    } else {
-      const Eigen::Vector2d d = q - previous;
-      const double len2 = d.squaredNorm();
-      const double s = len2 > 0.0 ? std::clamp((p - previous).dot(d) / len2, 0.0, 1.0) : 0.0;
-      best = std::min(best, (previous + s * d - p).norm());
-    }
-    previous = q;
-    any = true;
-  }
-  return any ? best : 0.0;
-}
-
 Eigen::MatrixXd columns(const Eigen::MatrixXd& m, const std::vector<int>& cols) {
   Eigen::MatrixXd out(m.rows(), static_cast<Eigen::Index>(cols.size()));
   for (std::size_t j = 0; j < cols.size(); ++j) out.col(static_cast<Eigen::Index>(j)) = m.col(cols[j]);
@@ -94,16 +70,6 @@ Eigen::MatrixXd columns(const Eigen::MatrixXd& m, const std::vector<int>& cols) 
 }
 
 }  // namespace
-
-/// One measurement of one reading that passed the gate of one feature.
-struct Slam::Candidate {
-  int measurement = 0;
-  int feature = 0;  ///< index into features_
-  double d2 = 0.0;  ///< squared Mahalanobis distance of the innovation
-  Innovation innovation;
-  Eigen::MatrixXd C_eta;    ///< J_ηv C_v J_ηvᵀ
-  Eigen::MatrixXd J_state;  ///< m × (k + dim): J_ηo (J_os J_sr  J_of B̃), eq. 30
-};
 
 struct Slam::Match {
   int feature = 0;
@@ -121,8 +87,8 @@ struct Slam::ReadingWork {
   std::vector<bool> may_create;  ///< per measurement: far from every feature
 };
 
-Slam::Slam(const RunConfig& config, PluginRegistry& registry) : config_(config) {
-  log_ = make_instance_logger("slam");
+Slam::Slam(const RunConfig& config, PluginRegistry& registry)
+    : config_(config), log_(make_instance_logger("slam")), associator_(config.association, config.sensors, log_) {
   auto make = [&](const InstanceConfig& inst, PluginKind kind, auto* tag,
                   std::shared_ptr<const LoadedPlugin>& lib) {
     using T = std::remove_pointer_t<decltype(tag)>;
@@ -249,6 +215,7 @@ bool Slam::step() {
   if (config_.association.join_distance > 0.0) join_shared_coordinates(touched);
   prune_tentative();
   stats_.seconds_extend += seconds_since(t0);
+  if (!work.empty()) associator_.map_changed();  // features were created, extended, joined
 
   record(data);
   return true;
@@ -360,122 +327,20 @@ void Slam::process_sensor_reading(const SensorReading& reading, int sensor_index
   t0 = Clock::now();
   update(w.matches);
   stats_.seconds_update += seconds_since(t0);
+  if (!w.matches.empty()) associator_.map_changed();  // the update moved features
   work.push_back(std::move(w));
 }
 
-// Association by Mahalanobis gating (ICRA §IV, "Prediction"). For each
-// feature the sensor feeds, the state part of the innovation covariance is
-// computed once per reading in sensor-frame coordinates,
-//   M = A P Aᵀ + J_of Σ_gate J_ofᵀ,  A = (J_os J_sr  J_of B̃)   (eqs. 19–21),
-// and each measurement then costs only S = J_ηo M J_ηoᵀ + J_ηv C_v J_ηvᵀ.
+// Association (ICRA §IV, "Prediction"): Mahalanobis gating, then nearest
+// neighbour or joint compatibility, and which measurements may start new
+// features — all in association.cpp.
 void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
                      ReadingWork& work) {
-  const AssociationConfig& ac = config_.association;
-  auto threshold = [](std::vector<double>& cache, double p, int m) {
-    if (static_cast<int>(cache.size()) <= m) cache.resize(static_cast<std::size_t>(m) + 1, -1.0);
-    if (cache[m] < 0.0) cache[m] = chi2_quantile(p, m);
-    return cache[m];
-  };
-
   Mat6 J_sr;
   const Pose6 x_ms = compound(x_r_, sensor.config.mount, &J_sr);  // eq. 17
-  const Eigen::MatrixXd J_sr_dofs = columns(J_sr, dofs_);
-  const int k = static_cast<int>(dofs_.size());
-
-  std::vector<Candidate> candidates;
-  // Per measurement: min over features of d² / (new-feature threshold).
-  std::vector<double> closest(meas.size(), std::numeric_limits<double>::infinity());
-  const Eigen::Vector2d sensor_xy(x_ms[kX], x_ms[kY]);
-  for (std::size_t fi = 0; fi < features_.size(); ++fi) {
-    const MapFeature& mf = features_[fi];
-    if (std::find(sensor.feeds.begin(), sensor.feeds.end(), mf.type) == sensor.feeds.end()) continue;
-    const FeatureTypeSlot& type = types_[mf.type];
-    const Feature& f = *mf.feature;
-    if (sensor.config.max_range > 0.0 && planar_distance(f, sensor_xy) > sensor.config.max_range) continue;
-    const CoordLayout& layout = f.layout();
-    Eigen::MatrixXd J_of, J_os;
-    const Eigen::VectorXd x_o = to_sensor_frame(layout, f.coords(), x_ms, &J_of, &J_os);  // eqs. 7–9, 18
-
-    const int dim = f.mspace_dim();
-    Eigen::MatrixXd A(layout.size(), k + dim);
-    A.leftCols(k) = J_os * J_sr_dofs;
-    std::vector<int> idx = robot_idx_;
-    if (dim > 0) {
-      const Eigen::MatrixXd Bd = guarded(type.instance, *type.library, "B_dual", [&] { return f.B_dual(); });
-      if (Bd.rows() != layout.size() || Bd.cols() != dim)
-        throw PluginError(type.instance + " (plugin '" + type.plugin + "'): B_dual is " +
-                          std::to_string(Bd.rows()) + "x" + std::to_string(Bd.cols()) + ", expected " +
-                          std::to_string(layout.size()) + "x" + std::to_string(dim));
-      require_finite(Bd, "B_dual", type.instance, *type.library);
-      A.rightCols(dim) = J_of * Bd;
-      idx.insert(idx.end(), mf.state_idx.begin(), mf.state_idx.end());
-    }
-    Eigen::MatrixXd M = A * estimator_->marginal(idx) * A.transpose();
-    const Eigen::MatrixXd gate_cov =
-        guarded(type.instance, *type.library, "gating_covariance", [&] { return f.gating_covariance(); });
-    if (gate_cov.size() > 0) M += J_of * gate_cov * J_of.transpose();
-
-    for (std::size_t mi = 0; mi < meas.size(); ++mi) {
-      // The scratch objects keep their storage from pair to pair: this loop
-      // runs for every (feature, measurement) pair of every reading.
-      Innovation& in = scratch_innovation_;
-      const bool ok = guarded(type.instance, *type.library, "innovation",
-                              [&] { return f.innovation(x_o, meas[mi], in); });
-      if (!ok) continue;
-      const auto m = in.eta.size();
-      if (m == 0 || in.J_eta_o.rows() != m || in.J_eta_o.cols() != layout.size() || in.J_eta_v.rows() != m ||
-          in.J_eta_v.cols() != meas[mi].v.size())
-        throw PluginError(type.instance + " (plugin '" + type.plugin +
-                          "'): innovation returned Jacobians of the wrong size");
-      require_finite(in.eta, "innovation", type.instance, *type.library);
-      require_finite(in.J_eta_o, "J_eta_o", type.instance, *type.library);
-      require_finite(in.J_eta_v, "J_eta_v", type.instance, *type.library);
-      Eigen::MatrixXd& C_eta = scratch_C_eta_;
-      Eigen::MatrixXd& S = scratch_S_;
-      C_eta.noalias() = in.J_eta_v * meas[mi].C_v * in.J_eta_v.transpose();
-      S.noalias() = in.J_eta_o * M * in.J_eta_o.transpose();  // eq. 29
-      S += C_eta;
-      const int mi_dim = static_cast<int>(m);
-      // Most pairs are far apart: d² = ηᵀS⁻¹η ≥ |η|²/λ_max(S) ≥ |η|²/trace(S),
-      // so when that bound is beyond both thresholds the pair can neither be
-      // gated in nor make the measurement ambiguous — no factorisation needed.
-      const double far = std::max(threshold(gate_chi2_, ac.gate_probability, mi_dim),
-                                  threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
-      if (!log_->enabled(LogLevel::Trace) && S.trace() > 0.0 && in.eta.squaredNorm() > far * S.trace()) continue;
-      scratch_ldlt_.compute(S);
-      if (scratch_ldlt_.info() != Eigen::Success || !(scratch_ldlt_.vectorD().array() > 0.0).all()) continue;
-      const double d2 = in.eta.dot(scratch_ldlt_.solve(in.eta));
-      closest[mi] = std::min(closest[mi], d2 / threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
-      if (log_->enabled(LogLevel::Trace))
-        log_->trace("step ", step_, ": measurement ", mi, " vs #", mf.id, " (dim ", dim, "): d2 ", d2, " eta ",
-                    in.eta.transpose());
-      if (d2 > threshold(gate_chi2_, ac.gate_probability, mi_dim)) continue;
-      Candidate c;
-      c.d2 = d2;
-      c.innovation = in;
-      c.C_eta = C_eta;
-      c.measurement = static_cast<int>(mi);
-      c.feature = static_cast<int>(fi);
-      c.J_state = in.J_eta_o * A;  // eq. 30: J_ηo (J_or  J_of B̃)
-      candidates.push_back(std::move(c));
-    }
-  }
-
-  // Greedy nearest neighbour, each measurement and each feature used at most
-  // once per reading: features in the estimator first, then tentative ones
-  // (which are often clutter and must not take a measurement from a feature
-  // they happen to lie close to), smallest distance first within each group.
-  const auto tentative = [&](const Candidate& c) { return features_[c.feature].feature->mspace_dim() == 0; };
-  std::sort(candidates.begin(), candidates.end(), [&](const Candidate& a, const Candidate& b) {
-    const bool ta = tentative(a), tb = tentative(b);
-    return ta != tb ? tb : a.d2 < b.d2;
-  });
-  std::vector<bool> meas_used(meas.size(), false);
-  std::vector<bool> feature_used(features_.size(), false);
-  for (Candidate& c : candidates) {
-    if (meas_used[c.measurement] || feature_used[c.feature]) continue;
-    meas_used[c.measurement] = true;
-    feature_used[c.feature] = true;
+  const AssociationView map{features_, types_, *estimator_, robot_idx_, step_};
+  AssociationResult result = associator_.associate(map, sensor, x_ms, columns(J_sr, dofs_), meas);
+  for (Candidate& c : result.matches) {
     Match match;
     match.feature = c.feature;
     match.sensor = sensor_index;
@@ -484,12 +349,7 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
     work.matches.push_back(std::move(match));
   }
   stats_.matched += static_cast<std::int64_t>(work.matches.size());
-
-  // An unmatched measurement starts a new feature only when it lies beyond
-  // the (wider) new-feature threshold of every feature: ambiguous
-  // measurements create nothing.
-  work.may_create.assign(meas.size(), false);
-  for (std::size_t mi = 0; mi < meas.size(); ++mi) work.may_create[mi] = !meas_used[mi] && closest[mi] > 1.0;
+  work.may_create = std::move(result.may_create);
 }
 
 // The health report of the sensor (sensor_health.hpp): counts, and the NIS of

@@ -22,6 +22,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
+#include "association.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"
 #include "mspace/estimator.hpp"
@@ -91,7 +92,7 @@ struct RunStats {
   std::int64_t unknown_channel_readings = 0;
   double seconds_predict = 0.0;
   double seconds_extract = 0.0;  ///< sensors' extractors (per sensor in the health reports)
-  double seconds_associate = 0.0;
+  double seconds_associate = 0.0;  ///< gating, selection and keeping the spatial index in step
   double seconds_update = 0.0;
   double seconds_dense = 0.0;
   double seconds_extend = 0.0;
@@ -134,6 +135,7 @@ class Slam {
   /// Current value of a shared coordinate (from its first member).
   Eigen::VectorXd shared_value(const SharedCoordinate& c) const;
   const RunStats& stats() const { return stats_; }
+  const AssociationStats& association_stats() const { return associator_.stats(); }
   std::size_t size_hint() const;
   Eigen::MatrixXd true_landmarks() const;
   /// Malformed records the data source skipped.
@@ -142,7 +144,6 @@ class Slam {
   std::vector<SensorHealthReport> sensor_health() const;
 
  private:
-  struct Candidate;
   struct Match;
   struct ReadingWork;
 
@@ -186,12 +187,7 @@ class Slam {
   double path_distance_ = 0.0;
   std::int64_t step_ = 0;
   int next_feature_id_ = 1;
-  std::vector<double> gate_chi2_;      ///< by innovation dimension
-  std::vector<double> new_feature_chi2_;
-  // Reused by associate() for every (feature, measurement) pair.
-  Innovation scratch_innovation_;
-  Eigen::MatrixXd scratch_C_eta_, scratch_S_;
-  Eigen::LDLT<Eigen::MatrixXd> scratch_ldlt_;
+  Associator associator_;  ///< gating, nearest neighbour / JCBB, the spatial index
   std::vector<StampedPose> trajectory_;
   std::vector<StampedPose> ground_truth_;
   std::vector<StampedPose> evaluated_;

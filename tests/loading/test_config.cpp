@@ -265,6 +265,31 @@ TEST(Config, RunAndAssociationValuesAreChecked) {
             "test.yaml:22:20: initial_pose.sigma[3]: -2 is out of range [0, inf]");
 }
 
+TEST(Config, AssociationMethodAndIndexKeys) {
+  EXPECT_EQ(config_error(kBase + "association:\n  method: greedy\n"),
+            "test.yaml:22:11: association.method: 'greedy' is not one of: nearest_neighbour, jcbb");
+  EXPECT_EQ(config_error(kBase + "association:\n  jcbb_max_nodes: 0\n"),
+            "test.yaml:22:19: association.jcbb_max_nodes: 0 is out of range [1, inf]");
+  EXPECT_EQ(config_error(kBase + "association:\n  spatial_index: sometimes\n"),
+            "test.yaml:22:18: association.spatial_index: expected true or false, got 'sometimes'");
+  EXPECT_EQ(config_error(kBase + "association:\n  index_cell_size: -1\n"),
+            "test.yaml:22:20: association.index_cell_size: -1 is out of range [0, inf]");
+  const RunConfig defaults = parse(kBase);
+  EXPECT_EQ(defaults.association.method, mspace::kernel::AssociationConfig::Method::NearestNeighbour);
+  EXPECT_TRUE(defaults.association.spatial_index);
+  const RunConfig c = parse(kBase + "association:\n  method: jcbb\n  jcbb_max_nodes: 500\n  spatial_index: false\n"
+                                    "  index_cell_size: 2.5\n");
+  EXPECT_EQ(c.association.method, mspace::kernel::AssociationConfig::Method::Jcbb);
+  EXPECT_EQ(c.association.jcbb_max_nodes, 500);
+  EXPECT_FALSE(c.association.spatial_index);
+  EXPECT_EQ(c.association.index_cell_size, 2.5);
+  const RunConfig again = parse(mspace::kernel::effective_config_yaml(c));
+  EXPECT_EQ(again.association.method, mspace::kernel::AssociationConfig::Method::Jcbb);
+  EXPECT_EQ(again.association.jcbb_max_nodes, 500);
+  EXPECT_FALSE(again.association.spatial_index);
+  EXPECT_EQ(again.association.index_cell_size, 2.5);
+}
+
 TEST(Config, EnvironmentVariablesAreExpandedInStrings) {
   ASSERT_EQ(setenv("MSPACE_TEST_DATA", "/mnt/data", 1), 0);
   unsetenv("MSPACE_TEST_UNSET_VAR");

@@ -1,0 +1,273 @@
+// Joint compatibility branch and bound (Neira & Tardós 2001) on hand-built
+// readings: 2-D point features observed relative to a 2-D robot position,
+//   z = f − x + v,  η = z − (f̂ − x̂),  J_state = (−I  I)  over (x, f),
+// so that every pairing of one reading shares the robot's uncertainty.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include "association.hpp"
+#include "chi2.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+
+/// A state of a robot position (rows 0, 1) and n features (rows 2+2j, 3+2j).
+struct World {
+  Eigen::MatrixXd P;
+  double meas_sigma = 0.05;
+
+  World(int features, double robot_sigma, double feature_sigma) {
+    P = Eigen::MatrixXd::Identity(2 + 2 * features, 2 + 2 * features) * feature_sigma * feature_sigma;
+    P.topLeftCorner(2, 2) = Eigen::Matrix2d::Identity() * robot_sigma * robot_sigma;
+  }
+
+  MarginalFn marginal() const {
+    return [this](const std::vector<int>& idx) {
+      Eigen::MatrixXd m(static_cast<Eigen::Index>(idx.size()), static_cast<Eigen::Index>(idx.size()));
+      for (std::size_t i = 0; i < idx.size(); ++i)
+        for (std::size_t j = 0; j < idx.size(); ++j)
+          m(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = P(idx[i], idx[j]);
+      return m;
+    };
+  }
+
+  /// Measurement `m` (innovation η against feature `f`) as a gated candidate.
+  Candidate candidate(int m, int f, const Eigen::Vector2d& eta) const {
+    Candidate c;
+    c.measurement = m;
+    c.feature = f;
+    c.innovation.eta = eta;
+    c.innovation.J_eta_o = Eigen::Matrix2d::Identity();
+    c.innovation.J_eta_v = Eigen::Matrix2d::Identity();
+    c.C_eta = Eigen::Matrix2d::Identity() * meas_sigma * meas_sigma;
+    c.J_state.resize(2, 4);
+    c.J_state << -Eigen::Matrix2d::Identity(), Eigen::Matrix2d::Identity();
+    c.idx = {0, 1, 2 + 2 * f, 3 + 2 * f};
+    c.d2 = eta.dot(individual_S(c).ldlt().solve(eta));
+    return c;
+  }
+
+  Eigen::MatrixXd individual_S(const Candidate& c) const {
+    return c.J_state * marginal()(c.idx) * c.J_state.transpose() + c.C_eta;
+  }
+
+  /// Joint D² of a set of candidates, from the full stacked S (no increments).
+  double joint_d2(const std::vector<Candidate>& cands, const std::vector<int>& chosen) const {
+    const Eigen::Index n = 2 * static_cast<Eigen::Index>(chosen.size());
+    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(n, P.cols());
+    Eigen::MatrixXd C = Eigen::MatrixXd::Zero(n, n);
+    Eigen::VectorXd nu(n);
+    for (std::size_t i = 0; i < chosen.size(); ++i) {
+      const Candidate& c = cands[chosen[i]];
+      const auto r = 2 * static_cast<Eigen::Index>(i);
+      for (std::size_t j = 0; j < c.idx.size(); ++j) J.block(r, c.idx[j], 2, 1) += c.J_state.col(static_cast<Eigen::Index>(j));
+      C.block(r, r, 2, 2) = c.C_eta;
+      nu.segment(r, 2) = c.innovation.eta;
+    }
+    const Eigen::MatrixXd S = J * P * J.transpose() + C;
+    return nu.dot(S.ldlt().solve(nu));
+  }
+};
+
+std::vector<std::pair<int, int>> pairs(const std::vector<Candidate>& cands, const std::vector<int>& chosen) {
+  std::vector<std::pair<int, int>> out;
+  for (int c : chosen) out.emplace_back(cands[c].measurement, cands[c].feature);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// Two features 1 m apart, both measured; the robot is 0.8 m further along x
+// than it believes (σ = 1 m), so both measurements are offset by −0.8 m.
+// Measurement 1 (of feature 1) lands 0.2 m from feature 0: nearest neighbour
+// takes that pair first and then gives measurement 0 to feature 1. JCBB sees
+// that the right pairs share one offset (the robot's), the wrong ones would
+// need the two measurements to move apart by 2 m with 5 cm noise.
+TEST(Jcbb, PairsRightWhereNearestNeighbourPairsWrong) {
+  const World w(2, 1.0, 0.01);
+  const Eigen::Vector2d f0(0.0, 0.0), f1(1.0, 0.0), offset(-0.8, 0.0);
+  const Eigen::Vector2d z0 = f0 + offset, z1 = f1 + offset;  // relative to the believed robot at 0
+  std::vector<Candidate> cands;
+  const double gate = chi2_quantile(0.99, 2);
+  for (int m = 0; m < 2; ++m)
+    for (int f = 0; f < 2; ++f) {
+      const Candidate c = w.candidate(m, f, (m == 0 ? z0 : z1) - (f == 0 ? f0 : f1));
+      ASSERT_LE(c.d2, gate) << "every pair is individually compatible";
+      cands.push_back(c);
+    }
+
+  std::vector<Candidate> greedy = cands;
+  const std::vector<int> nn = nearest_neighbour(greedy, 2, 2);
+  EXPECT_EQ(pairs(greedy, nn), (std::vector<std::pair<int, int>>{{0, 1}, {1, 0}})) << "greedy pairs wrongly";
+
+  const JcbbResult jc = joint_compatibility(cands, w.marginal(), {0.99, 1000});
+  ASSERT_FALSE(jc.bounded);
+  EXPECT_EQ(pairs(cands, jc.chosen), (std::vector<std::pair<int, int>>{{0, 0}, {1, 1}}));
+  // The incremental D² is the batch one, and the right pairs are jointly as
+  // good as either alone (their common offset is the robot's).
+  EXPECT_NEAR(jc.d2, w.joint_d2(cands, jc.chosen), 1e-9);
+  EXPECT_LT(jc.d2, 1.0);
+  EXPECT_GT(w.joint_d2(cands, {1, 2}), 100.0) << "the greedy pairs are jointly incompatible";
+}
+
+// Each measurement has one candidate and passes its gate alone, but the two
+// innovations point in opposite directions: one robot offset cannot explain
+// both. JCBB keeps one pairing; nearest neighbour would use both.
+TEST(Jcbb, RejectsAJointlyIncompatibleSetOfIndividuallyCompatiblePairs) {
+  const World w(2, 1.0, 0.01);
+  std::vector<Candidate> cands = {w.candidate(0, 0, {0.8, 0.0}), w.candidate(1, 1, {-0.8, 0.0})};
+  const double gate = chi2_quantile(0.99, 2);
+  for (const Candidate& c : cands) ASSERT_LE(c.d2, gate);
+  EXPECT_GT(w.joint_d2(cands, {0, 1}), chi2_quantile(0.99, 4));
+
+  std::vector<Candidate> greedy = cands;
+  EXPECT_EQ(nearest_neighbour(greedy, 2, 2).size(), 2u);
+  const JcbbResult jc = joint_compatibility(cands, w.marginal(), {0.99, 1000});
+  ASSERT_FALSE(jc.bounded);
+  ASSERT_EQ(jc.chosen.size(), 1u);
+  EXPECT_NEAR(jc.d2, cands[jc.chosen[0]].d2, 1e-9);
+
+  // With a small robot uncertainty the same innovations would fail their own
+  // gates; with a large one and the same sign they are jointly compatible.
+  std::vector<Candidate> same = {w.candidate(0, 0, {0.8, 0.0}), w.candidate(1, 1, {0.8, 0.05})};
+  const JcbbResult both = joint_compatibility(same, w.marginal(), {0.99, 1000});
+  EXPECT_EQ(both.chosen.size(), 2u);
+}
+
+// A candidate whose J_state does not match its state indices is refused.
+TEST(Jcbb, RefusesACandidateWithoutItsStateIndices) {
+  const World w(1, 1.0, 0.01);
+  std::vector<Candidate> cands = {w.candidate(0, 0, {0.1, 0.0})};
+  cands[0].idx.clear();
+  EXPECT_THROW(joint_compatibility(cands, w.marginal(), {0.99, 1000}), std::invalid_argument);
+}
+
+// Tentative candidates (features not in the estimator) take no part.
+TEST(Jcbb, IgnoresTentativeCandidates) {
+  const World w(2, 1.0, 0.01);
+  std::vector<Candidate> cands = {w.candidate(0, 0, {0.1, 0.0}), w.candidate(1, 1, {0.1, 0.0})};
+  cands[1].tentative = true;
+  const JcbbResult jc = joint_compatibility(cands, w.marginal(), {0.99, 1000});
+  EXPECT_EQ(pairs(cands, jc.chosen), (std::vector<std::pair<int, int>>{{0, 0}}));
+  cands[0].tentative = true;
+  const JcbbResult none = joint_compatibility(cands, w.marginal(), {0.99, 1000});
+  EXPECT_TRUE(none.chosen.empty());
+  EXPECT_EQ(none.nodes, 0);
+}
+
+/// The best hypothesis by exhaustive enumeration of the interpretation tree:
+/// most pairings, then smallest joint D², jointly compatible throughout.
+std::vector<int> brute_force(const World& w, const std::vector<Candidate>& cands, int measurements, double p,
+                             std::int64_t& leaves) {
+  std::vector<int> best, current;
+  int best_pairings = -1;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  std::vector<bool> used(64, false);
+  leaves = 0;
+  const auto recurse = [&](auto&& self, int m) -> void {
+    if (m == measurements) {
+      ++leaves;
+      const double d2 = current.empty() ? 0.0 : w.joint_d2(cands, current);
+      if (!current.empty() && d2 > chi2_quantile(p, 2 * static_cast<int>(current.size()))) return;
+      const int n = static_cast<int>(current.size());
+      if (n > best_pairings || (n == best_pairings && d2 < best_d2)) {
+        best = current;
+        best_pairings = n;
+        best_d2 = d2;
+      }
+      return;
+    }
+    for (std::size_t c = 0; c < cands.size(); ++c) {
+      if (cands[c].measurement != m || used[cands[c].feature]) continue;
+      // Every prefix must be jointly compatible too (D² grows with pairings
+      // but so does the threshold).
+      current.push_back(static_cast<int>(c));
+      if (w.joint_d2(cands, current) <= chi2_quantile(p, 2 * static_cast<int>(current.size()))) {
+        used[cands[c].feature] = true;
+        self(self, m + 1);
+        used[cands[c].feature] = false;
+      }
+      current.pop_back();
+    }
+    self(self, m + 1);
+  };
+  recurse(recurse, 0);
+  return best;
+}
+
+// Random clusters of features measured under a shared robot offset, with
+// clutter: JCBB finds the hypothesis exhaustive search finds, visiting fewer
+// nodes than the interpretation tree has leaves.
+TEST(Jcbb, MatchesExhaustiveSearchOnRandomReadings) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uni(-1.5, 1.5);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  const double gate = chi2_quantile(0.99, 2);
+  int checked = 0;
+  std::int64_t nodes = 0, leaves_total = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    const int nf = 5, nm = 5;
+    const World w(nf, 0.5, 0.02);
+    std::vector<Eigen::Vector2d> f(nf);
+    for (Eigen::Vector2d& p : f) p = {uni(rng), uni(rng)};
+    const Eigen::Vector2d offset(uni(rng) * 0.4, uni(rng) * 0.4);
+    std::vector<Candidate> cands;
+    for (int m = 0; m < nm; ++m) {
+      // Measurement m sees feature m (the last one is clutter somewhere).
+      const Eigen::Vector2d z = m < nf - 1 ? Eigen::Vector2d(f[m] + offset + Eigen::Vector2d(noise(rng), noise(rng)))
+                                           : Eigen::Vector2d(uni(rng), uni(rng));
+      for (int j = 0; j < nf; ++j) {
+        const Candidate c = w.candidate(m, j, z - f[j]);
+        if (c.d2 <= gate) cands.push_back(c);
+      }
+    }
+    std::int64_t leaves = 0;
+    const std::vector<int> expected = brute_force(w, cands, nm, 0.99, leaves);
+    const JcbbResult jc = joint_compatibility(cands, w.marginal(), {0.99, 1000000});
+    ASSERT_FALSE(jc.bounded);
+    EXPECT_EQ(pairs(cands, jc.chosen), pairs(cands, expected)) << "trial " << trial;
+    if (!expected.empty()) {
+      EXPECT_NEAR(jc.d2, w.joint_d2(cands, expected), 1e-6 * (1.0 + jc.d2));
+    }
+    nodes += jc.nodes;
+    leaves_total += leaves;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 60);
+  EXPECT_LT(nodes, leaves_total) << "branch and bound prunes the tree";
+}
+
+// A reading where every measurement is compatible with every feature (a
+// tight cluster under a large robot uncertainty): the tree has (n+1)!-like
+// size. The node bound stops the search, says so, and returns nothing (the
+// associator then uses nearest neighbour); with a generous bound it completes.
+TEST(Jcbb, StopsAtTheNodeBound) {
+  const int n = 7;
+  World w(n, 2.0, 0.3);
+  w.meas_sigma = 0.3;
+  std::vector<Candidate> cands;
+  for (int m = 0; m < n; ++m)
+    for (int f = 0; f < n; ++f) cands.push_back(w.candidate(m, f, {0.01 * (m - f), 0.02 * (f + m)}));
+
+  const JcbbResult small = joint_compatibility(cands, w.marginal(), {0.99, 50});
+  EXPECT_TRUE(small.bounded);
+  EXPECT_TRUE(small.chosen.empty());
+  EXPECT_LE(small.nodes, 51);
+
+  const JcbbResult full = joint_compatibility(cands, w.marginal(), {0.99, 10000000});
+  EXPECT_FALSE(full.bounded);
+  EXPECT_EQ(full.chosen.size(), static_cast<std::size_t>(n)) << "all pairings are jointly compatible";
+  EXPECT_GT(full.nodes, 50);
+}
+
+}  // namespace
