@@ -13,6 +13,7 @@
 
 #include "chi2.hpp"
 #include "logging.hpp"
+#include "problem.hpp"
 #include "mspace/transform.hpp"
 
 namespace mspace::kernel {
@@ -172,10 +173,20 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry) : config_(config) 
   const Eigen::MatrixXd U_r = planar_global_motion(x_r_, dofs_);
   guarded(config_.estimator.instance, *estimator_lib_, "set_unobservable",
           [&] { estimator_->set_unobservable(U_r); });
+
+  if (guarded(config_.estimator.instance, *estimator_lib_, "wants_problem",
+              [&] { return estimator_->wants_problem(); })) {
+    Problem::Context pc{&features_, &types_, &x_r_, dofs_, {}, motion_.get(), motion_lib_.get(),
+                        config_.motion.instance, estimator_.get(), estimator_lib_.get(), config_.estimator.instance};
+    for (const SensorSlot& s : sensors_) pc.mounts.push_back(s.config.mount);
+    problem_ = std::make_unique<Problem>(std::move(pc));
+    problem_->start(P0);
+  }
 }
 
 Slam::~Slam() {
   // Features were created by plugins: drop them before the types and libraries.
+  problem_.reset();
   features_.clear();
 }
 
@@ -223,6 +234,7 @@ bool Slam::step() {
 
   t0 = Clock::now();
   predict(data);
+  if (problem_ && !data.readings.empty()) problem_->key_pose();
   stats_.seconds_predict += seconds_since(t0);
 
   std::vector<ReadingWork> work;
@@ -245,6 +257,10 @@ bool Slam::step() {
   prune_tentative();
   stats_.seconds_extend += seconds_since(t0);
 
+  t0 = Clock::now();
+  if (problem_) problem_->end_of_step();  // a re-linearising estimator may move everything
+  stats_.seconds_update += seconds_since(t0);
+
   record(data);
   return true;
 }
@@ -255,6 +271,7 @@ void Slam::predict(const DataStep& data) {
   const double dt = started_ ? data.t - t_ : 0.0;
   started_ = true;
   t_ = data.t;
+  if (problem_) problem_->motion(data.odometry, dt);
   if (data.odometry.size() == 0) return;
   require_finite(data.odometry, "odometry increment", config_.source.instance, *source_lib_);
   const MotionPrediction pred = guarded(config_.motion.instance, *motion_lib_, "predict",
@@ -349,6 +366,11 @@ void Slam::process_sensor_reading(const SensorReading& reading, int sensor_index
   stats_.seconds_associate += seconds_since(t0);
 
   t0 = Clock::now();
+  if (problem_)
+    for (const Match& m : w.matches)
+      if (features_[m.feature].feature->mspace_dim() > 0)
+        problem_->observed(features_[m.feature], w.measurements[m.measurement], sensor_index, m.candidate.innovation,
+                           m.candidate.C_eta, m.candidate.J_state);
   update(w.matches);
   stats_.seconds_update += seconds_since(t0);
   work.push_back(std::move(w));
@@ -518,6 +540,7 @@ void Slam::update(std::vector<Match>& matches) {
   }
   for (std::size_t i = 0; i < dofs_.size(); ++i) x_r_[dofs_[i]] += dx[static_cast<Eigen::Index>(i)];
   for (int a = kTheta; a <= kPsi; ++a) x_r_[a] = wrap_angle(x_r_[a]);
+  if (problem_) problem_->moved(dx);
   for (MapFeature& mf : features_) {  // eq. 24: x_f += B̃ δx_p
     if (mf.state_idx.empty()) continue;
     Eigen::VectorXd dx_p(static_cast<Eigen::Index>(mf.state_idx.size()));
@@ -622,6 +645,7 @@ void Slam::extend(const std::vector<int>& touched) {
     }
     const int first =
         guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
+    if (problem_) problem_->extended(mf, aug, first);
     for (int i = 0; i < n; ++i) mf.own_idx.push_back(first + i);  // new own dims precede shared groups
     rebuild_state_idx(mf);
     ++stats_.extended;
@@ -641,6 +665,7 @@ void Slam::remove_state_rows(std::vector<int> rows) {
   if (rows.empty()) return;
   std::sort(rows.begin(), rows.end());
   guarded(config_.estimator.instance, *estimator_lib_, "remove", [&] { estimator_->remove(rows); });
+  if (problem_) problem_->removed(rows);
   const auto renumber = [&](std::vector<int>& idx) {
     for (int& i : idx) i -= static_cast<int>(std::lower_bound(rows.begin(), rows.end(), i) - rows.begin());
   };
@@ -723,6 +748,7 @@ bool Slam::try_join(int a, int ba, int b, int bb) {
   for (std::size_t j = 0; j < old_b.size(); ++j) J_corner.col(column(old_b[j])) += Jb.col(static_cast<Eigen::Index>(j));
 
   const int old_dim_a = ma.feature->mspace_dim(), old_dim_b = mb.feature->mspace_dim();
+  if (problem_) problem_->before_join(ma, mb);
   const Eigen::MatrixXd T_a =
       guarded(ta.instance, *ta.library, "share_block", [&] { return ma.feature->share_block(ba, proposal->value); });
   const Eigen::MatrixXd T_b =
@@ -767,6 +793,11 @@ bool Slam::try_join(int a, int ba, int b, int bb) {
   ma.shared[ba] = corner.id;
   mb.shared[bb] = corner.id;
   shared_.push_back(corner);
+  if (problem_) {  // the join is a change of variables of the problem
+    rebuild_state_idx(ma);
+    rebuild_state_idx(mb);
+    problem_->joined(ma, mb, obsolete);
+  }
   remove_state_rows(obsolete);  // also rebuilds every state_idx
   ++stats_.joined;
   log_->debug("step ", step_, ": ", ta.instance, " #", ma.id, " block ", ba, " and ", tb.instance, " #", mb.id,

@@ -33,6 +33,8 @@
 
 namespace mspace::kernel {
 
+class Problem;
+
 /// One feature in the map, as the kernel tracks it.
 struct MapFeature {
   int id = 0;
@@ -136,6 +138,9 @@ class Slam {
   Eigen::MatrixXd true_landmarks() const;
   /// Malformed records the data source skipped.
   std::size_t skipped_records() const;
+  /// The nonlinear problem (problem.hpp), recorded only for an estimator
+  /// that wants it; nullptr otherwise.
+  const Problem* problem() const { return problem_.get(); }
 
  private:
   struct Candidate;
@@ -165,6 +170,7 @@ class Slam {
   std::shared_ptr<DataSource> source_;
   std::shared_ptr<MotionModel> motion_;
   std::shared_ptr<Estimator> estimator_;
+  std::unique_ptr<Problem> problem_;  ///< only when estimator_->wants_problem()
   std::vector<std::shared_ptr<Logger>> plugin_loggers_;
   std::vector<FeatureTypeSlot> types_;
   std::vector<SensorSlot> sensors_;

@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "mspace/plugin.hpp"
+#include "mspace/problem.hpp"
 
 namespace mspace {
 
@@ -60,6 +61,21 @@ class Estimator : public PluginObject {
   /// estimators", IJRR 2010) carry them through predict, augment and remove;
   /// the others ignore them.
   virtual void set_unobservable(const Eigen::MatrixXd& /*U_r*/) {}
+
+  // ---- Re-linearisation (mspace/problem.hpp) --------------------------------
+  //
+  // An estimator that re-linearises (a smoother) says so here; the kernel then
+  // records the nonlinear problem — pose nodes, motion, observation and
+  // linear factors — alongside the calls above. Filters keep the default and
+  // the kernel records nothing, so they pay nothing for it.
+  virtual bool wants_problem() const { return false; }
+  /// Called once per step, after phase 4 (extend and shared coordinates), when
+  /// wants_problem(). The estimator may linearise any factor at the current
+  /// values and move every variable with problem.retract() (as often as it
+  /// iterates); it must leave its own covariance over [0, dim()) consistent
+  /// with the values it leaves behind. Returns true when it moved anything:
+  /// the kernel then takes the current robot pose from the problem.
+  virtual bool relinearize(NonlinearProblem& /*problem*/) { return false; }
 };
 
 }  // namespace mspace
