@@ -91,6 +91,7 @@ void Problem::sync_rows() {
 void Problem::start(const Eigen::MatrixXd& P0) {
   sync_rows();
   nodes_ = {*c_.x_r};
+  records_ = {0};
   current_ = true;
   auto f = std::make_unique<Factor>();
   f->kind = FactorKind::Prior;
@@ -113,9 +114,14 @@ void Problem::motion(const Eigen::VectorXd& x_d, double dt) {
   pending_.emplace_back(x_d, dt);
 }
 
-void Problem::key_pose() {
-  if (current_ || nodes_.empty()) return;
+void Problem::key_pose(std::size_t record) {
+  if (nodes_.empty()) return;
+  if (current_) {  // no motion since the newest node: it stands for this step too
+    records_.back() = record;
+    return;
+  }
   nodes_.push_back(*c_.x_r);
+  records_.push_back(record);
   current_ = true;
   node_this_step_ = true;
   auto f = std::make_unique<Factor>();
@@ -130,7 +136,7 @@ void Problem::key_pose() {
 void Problem::observed(const MapFeature& mf, const Measurement& m, int sensor, const Innovation& in,
                        const Eigen::MatrixXd& C_eta, const Eigen::MatrixXd& J_state) {
   sync_rows();
-  if (!current_) key_pose();
+  if (!current_) throw std::logic_error("problem: an observation without a pose node");
   auto f = std::make_unique<Factor>();
   f->kind = FactorKind::Observation;
   f->live = true;
@@ -333,6 +339,17 @@ bool Problem::end_of_step() {
   sync_rows();
   return guarded(c_.estimator_instance, *c_.estimator_lib, "relinearize",
                  [&] { return c_.estimator->relinearize(*this); });
+}
+
+void Problem::smoothed(std::vector<StampedPose>& trajectory, std::vector<StampedPose>& evaluated,
+                       const Pose6* eval_mount) const {
+  for (int node = 0; node < num_pose_nodes(); ++node) {
+    const std::size_t r = records_[static_cast<std::size_t>(node)];
+    if (r >= trajectory.size()) continue;
+    const Pose6 x = node_value(node);
+    trajectory[r].pose = x;
+    if (r < evaluated.size()) evaluated[r].pose = eval_mount != nullptr ? compound(x, *eval_mount) : x;
+  }
 }
 
 // ---- linearisation ------------------------------------------------------------

@@ -38,6 +38,7 @@
 #include "mspace/feature.hpp"
 #include "mspace/motion_model.hpp"
 #include "mspace/problem.hpp"
+#include "evaluation.hpp"
 #include "plugin_registry.hpp"
 
 namespace mspace::kernel {
@@ -72,8 +73,9 @@ class Problem final : public NonlinearProblem {
   void start(const Eigen::MatrixXd& P0);
   /// Before the robot moves by the odometry increment x_d over dt (empty: no motion).
   void motion(const Eigen::VectorXd& x_d, double dt);
-  /// The current pose becomes a pose node (no-op if it already is one).
-  void key_pose();
+  /// The current pose becomes a pose node (no-op if it already is one);
+  /// `record` is the index the step will have in the kernel's trajectory.
+  void key_pose(std::size_t record);
   /// An observation factor: feature `mf` (dimension > 0) matched measurement
   /// `m` of sensor `sensor`; `in`, `C_eta`, `J_state` are the linearisation
   /// at the current values (J over robot rows then mf.state_idx, eq. 30).
@@ -96,6 +98,12 @@ class Problem final : public NonlinearProblem {
   /// End of a step: when it added a pose node, Estimator::relinearize().
   /// Returns true when the estimator moved the variables.
   bool end_of_step();
+  /// Writes the pose nodes' current values into the recorded trajectory (and
+  /// the evaluated one, x_r ⊕ x_rs with `eval_mount` when given): what a
+  /// smoother reports is its smoothed trajectory. Steps without a node keep
+  /// what they recorded.
+  void smoothed(std::vector<StampedPose>& trajectory, std::vector<StampedPose>& evaluated,
+                const Pose6* eval_mount) const;
 
   // ---- NonlinearProblem ------------------------------------------------------
   int robot_dim() const override { return k_; }
@@ -127,6 +135,7 @@ class Problem final : public NonlinearProblem {
   Context c_;
   int k_ = 0;
   std::vector<Pose6> nodes_;  ///< values; the newest is *x_r while current_ is true
+  std::vector<std::size_t> records_;  ///< trajectory index of each node
   bool current_ = false;      ///< the newest node is the current pose
   bool node_this_step_ = false;
   std::vector<std::pair<Eigen::VectorXd, double>> pending_;  ///< odometry since the newest node

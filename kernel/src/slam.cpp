@@ -234,7 +234,7 @@ bool Slam::step() {
 
   t0 = Clock::now();
   predict(data);
-  if (problem_ && !data.readings.empty()) problem_->key_pose();
+  if (problem_ && !data.readings.empty()) problem_->key_pose(trajectory_.size());
   stats_.seconds_predict += seconds_since(t0);
 
   std::vector<ReadingWork> work;
@@ -258,7 +258,9 @@ bool Slam::step() {
   stats_.seconds_extend += seconds_since(t0);
 
   t0 = Clock::now();
-  if (problem_) problem_->end_of_step();  // a re-linearising estimator may move everything
+  if (problem_ && problem_->end_of_step())  // a re-linearising estimator moved everything
+    problem_->smoothed(trajectory_, evaluated_,
+                       ground_truth_sensor_ >= 0 ? &sensors_[ground_truth_sensor_].config.mount : nullptr);
   stats_.seconds_update += seconds_since(t0);
 
   record(data);
