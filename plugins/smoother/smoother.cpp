@@ -80,8 +80,11 @@ SpMat assemble(const Normal& normal, int n, double damping) {
 
 Smoother::Smoother(SmootherOptions options, Logger* log)
     : o_(options), log_(log != nullptr ? log : &null_logger()), ekf_(options.initial_capacity, false) {
-  if (o_.period < 0 || o_.loop_gap < 1 || o_.max_iterations < 1 || !(o_.loss_scale > 0.0))
-    throw std::invalid_argument("smoother: period ≥ 0, loop_gap ≥ 1, max_iterations ≥ 1 and loss_scale > 0 required");
+  if (o_.period < 0 || o_.loop_gap < 1 || o_.max_iterations < 1 || !(o_.loss_scale > 0.0) || o_.growth < 0.0 ||
+      o_.loop_spacing < 0)
+    throw std::invalid_argument(
+        "smoother: period ≥ 0, growth ≥ 0, loop_gap ≥ 1, loop_spacing ≥ 0, max_iterations ≥ 1 and loss_scale > 0 "
+        "required");
 }
 
 void Smoother::reset(const Eigen::MatrixXd& P_rr) {
@@ -136,9 +139,12 @@ void Smoother::remove(std::vector<int> idx) {
 
 bool Smoother::relinearize(NonlinearProblem& problem) {
   ++key_;
-  const bool periodic = o_.period > 0 && key_ - last_optimised_ >= o_.period;
-  if (!(periodic || loop_ || forced_)) return false;
-  if (loop_) ++loop_triggers_;
+  const std::int64_t since = key_ - last_optimised_;
+  const double due = std::max(static_cast<double>(o_.period), o_.growth * problem.num_pose_nodes());
+  const bool periodic = o_.period > 0 && static_cast<double>(since) >= due;
+  const bool loop = loop_ && since >= o_.loop_spacing;
+  if (!(periodic || loop || forced_)) return false;
+  if (loop && !periodic) ++loop_triggers_;
   optimise(problem);
   return true;
 }
@@ -181,7 +187,7 @@ void Smoother::optimise(NonlinearProblem& problem) {
     }
     normal = std::move(next);
     H = assemble(normal, n, kDamping);
-    if (delta.lpNorm<Eigen::Infinity>() < o_.tolerance) break;
+    if (delta.lpNorm<Eigen::Infinity>() < o_.tolerance || cost - normal.cost < o_.cost_tolerance * cost) break;
   }
   report_.final_cost = normal.cost;
   report_.down_weighted = normal.down_weighted;

@@ -7,12 +7,14 @@
 // costs what an EKF step costs, and the EKF's covariance is what the kernel
 // gates with. The kernel calls relinearize() at the end of every step that
 // added a pose node; the smoother optimises when
-//   - `period` pose nodes have passed since the last optimisation, or
+//   - max(`period`, `growth` × all pose nodes) pose nodes have passed since
+//     the last optimisation (so the optimisations' total cost stays about
+//     1/growth full optimisations of the final problem), or
 //   - an update re-observed a feature whose rows no update had touched for
 //     `loop_gap` pose nodes and moved the robot by at least `loop_correction`
 //     of its standard deviations (δx_rᵀ C_rr⁻¹ δx_r, C_rr before the update):
 //     a loop closes, the correction is large and the EKF's linearisation of
-//     everything since is the worst, or
+//     everything since is the worst (at most every `loop_spacing` nodes), or
 //   - the run asks for it (optimise_now(), tests).
 // Each optimisation (optimise()):
 //   1. Gauss–Newton with step halving: linearise every factor at the current
@@ -43,11 +45,14 @@ namespace mspace::smoother {
 enum class Loss : std::uint8_t { None, Huber, Cauchy };
 
 struct SmootherOptions {
-  int period = 100;           ///< pose nodes between optimisations (0: only on loops)
+  int period = 100;           ///< pose nodes between optimisations, at least (0: only on loops)
+  double growth = 0.25;       ///< … and at least this fraction of all pose nodes (amortised O(N))
+  int loop_spacing = 50;      ///< pose nodes since the last optimisation before a loop may trigger
   int loop_gap = 300;         ///< pose nodes unseen after which a re-observation may trigger
-  double loop_correction = 1.0;  ///< … if it moves the robot by ≥ this many σ (δx_rᵀ C_rr⁻¹ δx_r ≥ its square)
+  double loop_correction = 2.0;  ///< … if it moves the robot by ≥ this many σ (δx_rᵀ C_rr⁻¹ δx_r ≥ its square)
   int max_iterations = 5;     ///< Gauss–Newton iterations per optimisation
   double tolerance = 1e-4;    ///< stop when max |δ| (m, rad, M-space units) falls below
+  double cost_tolerance = 1e-3;  ///< … or the cost falls by less than this fraction
   Loss loss = Loss::Huber;
   double loss_scale = 3.0;    ///< in Mahalanobis units (√χ²)
   int initial_capacity = 64;  ///< of the EKF storage
