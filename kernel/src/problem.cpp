@@ -78,6 +78,18 @@ int Problem::live_observation_factors() const {
   return static_cast<int>(std::count_if(factors_.begin(), factors_.end(), [](const auto& f) { return f->live; }));
 }
 
+bool Problem::live_factors_match_features() const {
+  std::unordered_map<int, const MapFeature*> by_id;
+  for (const MapFeature& mf : *c_.features) by_id[mf.id] = &mf;
+  for (const auto& f : factors_) {
+    if (!f->live) continue;
+    const auto it = by_id.find(f->feature_id);
+    if (it == by_id.end() || it->second->feature->mspace_dim() != f->dim || it->second->state_idx != f->rows)
+      return false;
+  }
+  return true;
+}
+
 void Problem::sync_rows() {
   const int n = state_dim();
   const auto old = acc_.size();

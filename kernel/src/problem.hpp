@@ -118,6 +118,9 @@ class Problem final : public NonlinearProblem {
   /// Counters for tests and the log.
   int frozen_factors() const { return frozen_; }
   int live_observation_factors() const;
+  /// The frozen-factor rule holds: every live observation factor's feature
+  /// has the M-space dimension and estimator rows it had when recorded.
+  bool live_factors_match_features() const;
   /// Value of pose node `node`.
   Pose6 node_value(int node) const;
 

@@ -141,6 +141,7 @@ class Slam {
   /// The nonlinear problem (problem.hpp), recorded only for an estimator
   /// that wants it; nullptr otherwise.
   const Problem* problem() const { return problem_.get(); }
+  Problem* problem() { return problem_.get(); }
 
  private:
   struct Candidate;
