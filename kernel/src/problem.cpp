@@ -345,12 +345,13 @@ void Problem::removed(const std::vector<int>& rows) {
   }
 }
 
-bool Problem::end_of_step() {
-  if (!node_this_step_) return false;
+bool Problem::end_of_step(bool end_of_data) {
+  if (!node_this_step_ && !end_of_data) return false;
   node_this_step_ = false;
   sync_rows();
+  if (end_of_data && !current_) return false;  // the robot moved on from the newest node: nothing to index it by
   return guarded(c_.estimator_instance, *c_.estimator_lib, "relinearize",
-                 [&] { return c_.estimator->relinearize(*this); });
+                 [&] { return c_.estimator->relinearize(*this, end_of_data); });
 }
 
 void Problem::smoothed(std::vector<StampedPose>& trajectory, std::vector<StampedPose>& evaluated,

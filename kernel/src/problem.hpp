@@ -95,9 +95,10 @@ class Problem final : public NonlinearProblem {
   void joined(const MapFeature& a, const MapFeature& b, std::vector<int> obsolete);
   /// Estimator rows `rows` (sorted) were removed; later rows shift down.
   void removed(const std::vector<int>& rows);
-  /// End of a step: when it added a pose node, Estimator::relinearize().
-  /// Returns true when the estimator moved the variables.
-  bool end_of_step();
+  /// End of a step: when it added a pose node (or at the end of the data,
+  /// `end_of_data`), Estimator::relinearize(). Returns true when the
+  /// estimator moved the variables.
+  bool end_of_step(bool end_of_data);
   /// Writes the pose nodes' current values into the recorded trajectory (and
   /// the evaluated one, x_r ⊕ x_rs with `eval_mount` when given): what a
   /// smoother reports is its smoothed trajectory. Steps without a node keep

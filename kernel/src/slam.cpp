@@ -223,12 +223,12 @@ Eigen::VectorXd Slam::shared_value(const SharedCoordinate& c) const {
 }
 
 bool Slam::step() {
-  if (config_.max_steps > 0 && step_ >= config_.max_steps) return false;
+  if (config_.max_steps > 0 && step_ >= config_.max_steps) return relinearize(true);
   DataStep data;
   auto t0 = Clock::now();
   const bool more = guarded(config_.source.instance, *source_lib_, "next", [&] { return source_->next(data); });
   stats_.seconds_source += seconds_since(t0);
-  if (!more) return false;
+  if (!more) return relinearize(true);
   ++step_;
   ++stats_.steps;
 
@@ -257,14 +257,21 @@ bool Slam::step() {
   prune_tentative();
   stats_.seconds_extend += seconds_since(t0);
 
-  t0 = Clock::now();
-  if (problem_ && problem_->end_of_step())  // a re-linearising estimator moved everything
-    problem_->smoothed(trajectory_, evaluated_,
-                       ground_truth_sensor_ >= 0 ? &sensors_[ground_truth_sensor_].config.mount : nullptr);
-  stats_.seconds_update += seconds_since(t0);
+  relinearize(false);
 
   record(data);
   return true;
+}
+
+bool Slam::relinearize(bool end_of_data) {
+  if (!problem_ || finished_) return false;
+  finished_ = end_of_data;
+  const auto t0 = Clock::now();
+  if (problem_->end_of_step(end_of_data))  // a re-linearising estimator moved everything
+    problem_->smoothed(trajectory_, evaluated_,
+                       ground_truth_sensor_ >= 0 ? &sensors_[ground_truth_sensor_].config.mount : nullptr);
+  stats_.seconds_update += seconds_since(t0);
+  return false;
 }
 
 // ---- Phase 1: predict ------------------------------------------------------

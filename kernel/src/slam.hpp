@@ -163,6 +163,8 @@ class Slam {
   void rebuild_state_idx(MapFeature& mf) const;
   void prune_tentative();
   void record(const DataStep& data);
+  /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
+  bool relinearize(bool end_of_data);
   SensorView sensor_view(int sensor_index, double t) const;
 
   RunConfig config_;
@@ -172,6 +174,7 @@ class Slam {
   std::shared_ptr<MotionModel> motion_;
   std::shared_ptr<Estimator> estimator_;
   std::unique_ptr<Problem> problem_;  ///< only when estimator_->wants_problem()
+  bool finished_ = false;             ///< the end-of-data relinearize() ran
   std::vector<std::shared_ptr<Logger>> plugin_loggers_;
   std::vector<FeatureTypeSlot> types_;
   std::vector<SensorSlot> sensors_;

@@ -35,6 +35,7 @@ struct Normal {
   std::vector<Eigen::Triplet<double>> triplets;
   Eigen::VectorXd g;
   double cost = 0.0;
+  double by_kind[4] = {0, 0, 0, 0};  ///< ½ Σ ρ by FactorKind
   int down_weighted = 0;
 };
 
@@ -54,6 +55,7 @@ Normal build(NonlinearProblem& problem, const SmootherOptions& o) {
     const auto [rho, w] = lin.robust ? robust(o.loss, o.loss_scale, s) : std::pair<double, double>{s, 1.0};
     if (lin.robust && w < 1.0) ++out.down_weighted;
     out.cost += 0.5 * rho;
+    out.by_kind[static_cast<int>(lin.kind)] += 0.5 * rho;
     const Eigen::MatrixXd H = w * J.transpose() * J;
     const Eigen::VectorXd g = w * J.transpose() * r;
     for (std::size_t a = 0; a < lin.idx.size(); ++a) {
@@ -137,7 +139,12 @@ void Smoother::remove(std::vector<int> idx) {
   last_seen_ = std::move(kept);
 }
 
-bool Smoother::relinearize(NonlinearProblem& problem) {
+bool Smoother::relinearize(NonlinearProblem& problem, bool end_of_data) {
+  if (end_of_data) {
+    if (key_ == last_optimised_ || problem.num_pose_nodes() == 0) return false;
+    optimise(problem);
+    return true;
+  }
   ++key_;
   const std::int64_t since = key_ - last_optimised_;
   const double due = std::max(static_cast<double>(o_.period), o_.growth * problem.num_pose_nodes());
@@ -167,6 +174,8 @@ void Smoother::optimise(NonlinearProblem& problem) {
   report_.variables = n;
   Normal normal = build(problem, o_);
   report_.initial_cost = normal.cost;
+  log_->debug("optimisation ", optimisations_ + 0, ": cost before by kind: prior ", normal.by_kind[0], ", motion ",
+              normal.by_kind[1], ", observation ", normal.by_kind[2], ", linear ", normal.by_kind[3]);
   SpMat H = assemble(normal, n, kDamping);
   Eigen::SimplicialLDLT<SpMat, Eigen::Lower> ldlt;
   ldlt.analyzePattern(H);
@@ -192,19 +201,29 @@ void Smoother::optimise(NonlinearProblem& problem) {
   report_.final_cost = normal.cost;
   report_.down_weighted = normal.down_weighted;
 
-  // The running covariance: (H⁻¹)[0, state)², columns from the factorisation.
+  // The running covariance: the marginal (H⁻¹)[S, S] of the state rows S =
+  // [0, state) with the earlier pose nodes P marginalised, as the inverse of
+  // the Schur complement H_SS − H_PSᵀ H_PP⁻¹ H_PS. H_PP is block tridiagonal
+  // (each factor touches at most one earlier node, a motion factor two
+  // consecutive ones), so its sparse LDLᵀ has no fill: O(N k²) per column.
   const auto t1 = std::chrono::steady_clock::now();
-  ldlt.factorize(H);
-  if (ldlt.info() != Eigen::Success) throw std::runtime_error("smoother: the information matrix is not positive definite");
-  Eigen::MatrixXd C(state, state);
-  constexpr int kBlock = 64;
-  for (int c0 = 0; c0 < state; c0 += kBlock) {
-    const int cols = std::min(kBlock, state - c0);
-    Eigen::MatrixXd E = Eigen::MatrixXd::Zero(n, cols);
-    for (int j = 0; j < cols; ++j) E(c0 + j, j) = 1.0;
-    const Eigen::MatrixXd X = ldlt.solve(E);
-    C.middleCols(c0, cols) = X.topRows(state);
+  const int np = n - state;
+  Eigen::MatrixXd C = Eigen::MatrixXd(H.topLeftCorner(state, state)).selfadjointView<Eigen::Lower>();
+  if (np > 0) {
+    const SpMat H_PP = H.bottomRightCorner(np, np);
+    const SpMat H_PS = H.bottomLeftCorner(np, state);
+    Eigen::SimplicialLDLT<SpMat, Eigen::Lower> pp(H_PP);
+    if (pp.info() != Eigen::Success) throw std::runtime_error("smoother: H_PP is not positive definite");
+    constexpr int kBlock = 64;
+    for (int c0 = 0; c0 < state; c0 += kBlock) {
+      const int cols = std::min(kBlock, state - c0);
+      const Eigen::MatrixXd X = pp.solve(Eigen::MatrixXd(H_PS.middleCols(c0, cols)));
+      C.middleCols(c0, cols).noalias() -= H_PS.transpose() * X;
+    }
   }
+  const Eigen::LLT<Eigen::MatrixXd> schur(C);
+  if (schur.info() != Eigen::Success) throw std::runtime_error("smoother: the Schur complement is not positive definite");
+  C = schur.solve(Eigen::MatrixXd::Identity(state, state));
   ekf_.assign(0.5 * (C + C.transpose()));
   const auto t2 = std::chrono::steady_clock::now();
   report_.seconds = std::chrono::duration<double>(t2 - t0).count();

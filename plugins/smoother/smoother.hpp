@@ -15,7 +15,8 @@
 //     of its standard deviations (δx_rᵀ C_rr⁻¹ δx_r, C_rr before the update):
 //     a loop closes, the correction is large and the EKF's linearisation of
 //     everything since is the worst (at most every `loop_spacing` nodes), or
-//   - the run asks for it (optimise_now(), tests).
+//   - the data ended (end_of_data) and anything happened since the last one,
+//   - or the run asks for it (optimise_now(), tests).
 // Each optimisation (optimise()):
 //   1. Gauss–Newton with step halving: linearise every factor at the current
 //      values, whiten with C⁻½, weight observations by the robust loss
@@ -24,11 +25,14 @@
 //      SimplicialLDLT, AMD ordering, symbolic analysis once per optimisation),
 //      retract everything through the problem (eq. 24 for features);
 //   2. the running covariance is re-set to the marginal of the final
-//      information matrix H over the estimator's rows [0, dim()) (current pose
-//      and every M-space row; the earlier poses marginalised): the columns
-//      H⁻¹ e_i, i < dim(), from the same factorisation, in blocks of 64.
-//      Cost: dim() sparse solves, O(dim() · nnz(L)) — for a map of n rows
-//      and N pose nodes about n · (N k + n²/2) operations.
+//      information matrix H over the estimator's rows S = [0, dim()) (current
+//      pose and every M-space row), the earlier pose nodes P marginalised:
+//      the inverse of the Schur complement H_SS − H_PSᵀ H_PP⁻¹ H_PS. H_PP is
+//      block tridiagonal (every factor touches at most one earlier node, a
+//      motion factor two consecutive ones), so its sparse LDLᵀ has no fill.
+//      Cost for n = dim() and N pose nodes of k rows: O(N k³) to factor
+//      H_PP, O(n (N k² + nnz(H_PS))) for the n solves and products, O(n³)
+//      for the dense inverse; memory O(n² + 64 N k).
 #pragma once
 
 #include <cstdint>
@@ -46,7 +50,7 @@ enum class Loss : std::uint8_t { None, Huber, Cauchy };
 
 struct SmootherOptions {
   int period = 100;           ///< pose nodes between optimisations, at least (0: only on loops)
-  double growth = 0.25;       ///< … and at least this fraction of all pose nodes (amortised O(N))
+  double growth = 0.5;        ///< … and at least this fraction of all pose nodes (amortised O(N))
   int loop_spacing = 50;      ///< pose nodes since the last optimisation before a loop may trigger
   int loop_gap = 300;         ///< pose nodes unseen after which a re-observation may trigger
   double loop_correction = 2.0;  ///< … if it moves the robot by ≥ this many σ (δx_rᵀ C_rr⁻¹ δx_r ≥ its square)
@@ -86,7 +90,7 @@ class Smoother final : public Estimator {
   void remove(std::vector<int> idx) override;
 
   bool wants_problem() const override { return true; }
-  bool relinearize(NonlinearProblem& problem) override;
+  bool relinearize(NonlinearProblem& problem, bool end_of_data) override;
 
   /// Runs one optimisation now (whatever the triggers say).
   void optimise(NonlinearProblem& problem);

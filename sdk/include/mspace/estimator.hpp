@@ -69,13 +69,16 @@ class Estimator : public PluginObject {
   // linear factors — alongside the calls above. Filters keep the default and
   // the kernel records nothing, so they pay nothing for it.
   virtual bool wants_problem() const { return false; }
-  /// Called once per step, after phase 4 (extend and shared coordinates), when
-  /// wants_problem(). The estimator may linearise any factor at the current
-  /// values and move every variable with problem.retract() (as often as it
-  /// iterates); it must leave its own covariance over [0, dim()) consistent
-  /// with the values it leaves behind. Returns true when it moved anything:
-  /// the kernel then takes the current robot pose from the problem.
-  virtual bool relinearize(NonlinearProblem& /*problem*/) { return false; }
+  /// Called when wants_problem(): after phase 4 (extend and shared
+  /// coordinates) of every step that added a pose node, and once more with
+  /// end_of_data when the data ends (the last chance to optimise). The
+  /// estimator may linearise any factor at the current values and move every
+  /// variable with problem.retract() (as often as it iterates); it must leave
+  /// its own covariance over [0, dim()) consistent with the values it leaves
+  /// behind. Returns true when it moved anything: the kernel then takes the
+  /// current robot pose and the pose nodes (the smoothed trajectory) from the
+  /// problem.
+  virtual bool relinearize(NonlinearProblem& /*problem*/, bool /*end_of_data*/) { return false; }
 };
 
 }  // namespace mspace
