@@ -13,8 +13,8 @@
 
 #include "chi2.hpp"
 #include "logging.hpp"
-#include "problem.hpp"
 #include "mspace/transform.hpp"
+#include "problem.hpp"
 
 namespace mspace::kernel {
 namespace {
