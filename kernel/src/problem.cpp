@@ -27,6 +27,7 @@ struct Problem::Factor {
   // motion
   int from = 0, to = 0;
   std::vector<std::pair<Eigen::VectorXd, double>> odometry;
+  std::vector<std::size_t> odometry_records;  ///< trajectory index of each increment
   // The linearisation r = eta + J (x ⊟ x_lin): linear factors always, live
   // observations their newest one (kept for freezing). Columns: k per node
   // in lin_nodes, then one per estimator row in lin_rows.
@@ -117,13 +118,14 @@ void Problem::start(const Eigen::MatrixXd& P0) {
   factors_.push_back(std::move(f));
 }
 
-void Problem::motion(const Eigen::VectorXd& x_d, double dt) {
+void Problem::motion(const Eigen::VectorXd& x_d, double dt, std::size_t record) {
   if (x_d.size() == 0 || nodes_.empty()) return;
   if (current_) {  // the newest node keeps the value it has before the robot moves
     nodes_.back() = *c_.x_r;
     current_ = false;
   }
   pending_.emplace_back(x_d, dt);
+  pending_records_.push_back(record);
 }
 
 void Problem::key_pose(std::size_t record) {
@@ -141,7 +143,9 @@ void Problem::key_pose(std::size_t record) {
   f->from = static_cast<int>(nodes_.size()) - 2;
   f->to = static_cast<int>(nodes_.size()) - 1;
   f->odometry = std::move(pending_);
+  f->odometry_records = std::move(pending_records_);
   pending_.clear();
+  pending_records_.clear();
   factors_.push_back(std::move(f));
 }
 
@@ -356,13 +360,31 @@ bool Problem::end_of_step(bool end_of_data) {
 
 void Problem::smoothed(std::vector<StampedPose>& trajectory, std::vector<StampedPose>& evaluated,
                        const Pose6* eval_mount) const {
-  for (int node = 0; node < num_pose_nodes(); ++node) {
-    const std::size_t r = records_[static_cast<std::size_t>(node)];
-    if (r >= trajectory.size()) continue;
-    const Pose6 x = node_value(node);
-    trajectory[r].pose = x;
+  const auto write = [&](std::size_t r, const Pose6& x) {
+    if (r < trajectory.size()) trajectory[r].pose = x;
     if (r < evaluated.size()) evaluated[r].pose = eval_mount != nullptr ? compound(x, *eval_mount) : x;
+  };
+  // Steps between two nodes: the motion model from the earlier node, the
+  // mismatch at the later one spread over the increments.
+  std::vector<Pose6> poses;
+  for (const auto& f : factors_) {
+    if (f->kind != FactorKind::Motion || f->odometry.empty()) continue;
+    poses.clear();
+    Pose6 x = node_value(f->from);
+    for (const auto& [u, dt] : f->odometry) {
+      x = guarded(c_.motion_instance, *c_.motion_lib, "predict", [&] { return c_.motion->predict(x, u, dt); }).pose;
+      poses.push_back(x);
+    }
+    const Pose6 mismatch = pose_difference(node_value(f->to), x);
+    const double m = static_cast<double>(poses.size());
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      Pose6 p = poses[i];
+      for (int d : c_.dofs) p[d] += mismatch[d] * static_cast<double>(i + 1) / m;
+      for (int a = kTheta; a <= kPsi; ++a) p[a] = wrap_angle(p[a]);
+      write(f->odometry_records[i], p);
+    }
   }
+  for (int node = 0; node < num_pose_nodes(); ++node) write(records_[static_cast<std::size_t>(node)], node_value(node));
 }
 
 // ---- linearisation ------------------------------------------------------------

@@ -71,8 +71,9 @@ class Problem final : public NonlinearProblem {
   // ---- recording (Slam) ------------------------------------------------------
   /// The prior of the first pose node (the current pose) with covariance P0.
   void start(const Eigen::MatrixXd& P0);
-  /// Before the robot moves by the odometry increment x_d over dt (empty: no motion).
-  void motion(const Eigen::VectorXd& x_d, double dt);
+  /// Before the robot moves by the odometry increment x_d over dt (empty: no
+  /// motion); `record` is the index the step will have in the trajectory.
+  void motion(const Eigen::VectorXd& x_d, double dt, std::size_t record);
   /// The current pose becomes a pose node (no-op if it already is one);
   /// `record` is the index the step will have in the kernel's trajectory.
   void key_pose(std::size_t record);
@@ -101,8 +102,10 @@ class Problem final : public NonlinearProblem {
   bool end_of_step(bool end_of_data);
   /// Writes the pose nodes' current values into the recorded trajectory (and
   /// the evaluated one, x_r ⊕ x_rs with `eval_mount` when given): what a
-  /// smoother reports is its smoothed trajectory. Steps without a node keep
-  /// what they recorded.
+  /// smoother reports is its smoothed trajectory. A step between two nodes
+  /// gets the motion model run from the earlier node over the stored
+  /// increments, with the mismatch at the later node spread linearly over the
+  /// increments; steps after the newest node keep what they recorded.
   void smoothed(std::vector<StampedPose>& trajectory, std::vector<StampedPose>& evaluated,
                 const Pose6* eval_mount) const;
 
@@ -143,6 +146,7 @@ class Problem final : public NonlinearProblem {
   bool current_ = false;      ///< the newest node is the current pose
   bool node_this_step_ = false;
   std::vector<std::pair<Eigen::VectorXd, double>> pending_;  ///< odometry since the newest node
+  std::vector<std::size_t> pending_records_;                 ///< their trajectory indices
   Eigen::VectorXd acc_;  ///< accumulated perturbation of every estimator row (robot rows unused)
   std::vector<std::unique_ptr<Factor>> factors_;
   int frozen_ = 0;

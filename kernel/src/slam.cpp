@@ -280,7 +280,7 @@ void Slam::predict(const DataStep& data) {
   const double dt = started_ ? data.t - t_ : 0.0;
   started_ = true;
   t_ = data.t;
-  if (problem_) problem_->motion(data.odometry, dt);
+  if (problem_) problem_->motion(data.odometry, dt, trajectory_.size());
   if (data.odometry.size() == 0) return;
   require_finite(data.odometry, "odometry increment", config_.source.instance, *source_lib_);
   const MotionPrediction pred = guarded(config_.motion.instance, *motion_lib_, "predict",
