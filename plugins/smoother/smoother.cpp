@@ -48,7 +48,8 @@ Normal build(NonlinearProblem& problem, const SmootherOptions& o) {
     if (!problem.linearize(i, lin) || lin.eta.size() == 0) continue;
     const Eigen::LLT<Eigen::MatrixXd> llt(lin.C);
     if (llt.info() != Eigen::Success)
-      throw std::runtime_error("smoother: factor " + std::to_string(i) + " has a covariance that is not positive definite");
+      throw std::runtime_error("smoother: factor " + std::to_string(i) +
+                               " has a covariance that is not positive definite");
     const Eigen::VectorXd r = llt.matrixL().solve(lin.eta);  // whitened
     const Eigen::MatrixXd J = llt.matrixL().solve(lin.J);
     const double s = r.squaredNorm();
@@ -62,7 +63,8 @@ Normal build(NonlinearProblem& problem, const SmootherOptions& o) {
       out.g[lin.idx[a]] += g[static_cast<Eigen::Index>(a)];
       for (std::size_t b = 0; b < lin.idx.size(); ++b)
         if (lin.idx[b] <= lin.idx[a])  // lower triangle
-          out.triplets.emplace_back(lin.idx[a], lin.idx[b], H(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)));
+          out.triplets.emplace_back(lin.idx[a], lin.idx[b],
+                                    H(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)));
     }
   }
   return out;
@@ -181,7 +183,8 @@ void Smoother::optimise(NonlinearProblem& problem) {
   ldlt.analyzePattern(H);
   for (int it = 0; it < o_.max_iterations; ++it) {
     ldlt.factorize(H);
-    if (ldlt.info() != Eigen::Success) throw std::runtime_error("smoother: the information matrix is not positive definite");
+    if (ldlt.info() != Eigen::Success)
+      throw std::runtime_error("smoother: the information matrix is not positive definite");
     Eigen::VectorXd delta = -ldlt.solve(normal.g);
     const double cost = normal.cost;
     problem.retract(delta);
@@ -222,7 +225,8 @@ void Smoother::optimise(NonlinearProblem& problem) {
     }
   }
   const Eigen::LLT<Eigen::MatrixXd> schur(C);
-  if (schur.info() != Eigen::Success) throw std::runtime_error("smoother: the Schur complement is not positive definite");
+  if (schur.info() != Eigen::Success)
+    throw std::runtime_error("smoother: the Schur complement is not positive definite");
   C = schur.solve(Eigen::MatrixXd::Identity(state, state));
   ekf_.assign(0.5 * (C + C.transpose()));
   const auto t2 = std::chrono::steady_clock::now();
@@ -230,7 +234,8 @@ void Smoother::optimise(NonlinearProblem& problem) {
   report_.seconds_marginal = std::chrono::duration<double>(t2 - t1).count();
   log_->debug("optimisation ", optimisations_, ": ", report_.iterations, " iterations, cost ", report_.initial_cost,
               " -> ", report_.final_cost, ", ", report_.factors, " factors, ", n, " variables, ",
-              report_.down_weighted, " down-weighted, ", report_.seconds, " s (marginal ", report_.seconds_marginal, " s)");
+              report_.down_weighted, " down-weighted, ", report_.seconds, " s (marginal ", report_.seconds_marginal,
+              " s)");
 }
 
 }  // namespace mspace::smoother

@@ -53,7 +53,8 @@ struct SmootherOptions {
   double growth = 0.5;        ///< … and at least this fraction of all pose nodes (amortised O(N))
   int loop_spacing = 50;      ///< pose nodes since the last optimisation before a loop may trigger
   int loop_gap = 300;         ///< pose nodes unseen after which a re-observation may trigger
-  double loop_correction = 2.0;  ///< … if it moves the robot by ≥ this many σ (δx_rᵀ C_rr⁻¹ δx_r ≥ its square)
+  /// … if that update moves the robot by ≥ this many σ (δx_rᵀ C_rr⁻¹ δx_r ≥ its square)
+  double loop_correction = 2.0;
   int max_iterations = 5;     ///< Gauss–Newton iterations per optimisation
   double tolerance = 1e-4;    ///< stop when max |δ| (m, rad, M-space units) falls below
   double cost_tolerance = 1e-3;  ///< … or the cost falls by less than this fraction
