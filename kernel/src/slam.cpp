@@ -14,6 +14,7 @@
 #include "chi2.hpp"
 #include "logging.hpp"
 #include "mspace/transform.hpp"
+#include "problem.hpp"
 
 namespace mspace::kernel {
 namespace {
@@ -143,10 +144,20 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
   const Eigen::MatrixXd U_r = planar_global_motion(x_r_, dofs_);
   guarded(config_.estimator.instance, *estimator_lib_, "set_unobservable",
           [&] { estimator_->set_unobservable(U_r); });
+
+  if (guarded(config_.estimator.instance, *estimator_lib_, "wants_problem",
+              [&] { return estimator_->wants_problem(); })) {
+    Problem::Context pc{&features_, &types_, &x_r_, dofs_, {}, motion_.get(), motion_lib_.get(),
+                        config_.motion.instance, estimator_.get(), estimator_lib_.get(), config_.estimator.instance};
+    for (const SensorSlot& s : sensors_) pc.mounts.push_back(s.config.mount);
+    problem_ = std::make_unique<Problem>(std::move(pc));
+    problem_->start(P0);
+  }
 }
 
 Slam::~Slam() {
   // Features were created by plugins: drop them before the types and libraries.
+  problem_.reset();
   features_.clear();
 }
 
@@ -183,17 +194,18 @@ Eigen::VectorXd Slam::shared_value(const SharedCoordinate& c) const {
 }
 
 bool Slam::step() {
-  if (config_.max_steps > 0 && step_ >= config_.max_steps) return false;
+  if (config_.max_steps > 0 && step_ >= config_.max_steps) return relinearize(true);
   DataStep data;
   auto t0 = Clock::now();
   const bool more = guarded(config_.source.instance, *source_lib_, "next", [&] { return source_->next(data); });
   stats_.seconds_source += seconds_since(t0);
-  if (!more) return false;
+  if (!more) return relinearize(true);
   ++step_;
   ++stats_.steps;
 
   t0 = Clock::now();
   predict(data);
+  if (problem_ && !data.readings.empty()) problem_->key_pose(trajectory_.size());
   stats_.seconds_predict += seconds_since(t0);
 
   std::vector<ReadingWork> work;
@@ -217,8 +229,23 @@ bool Slam::step() {
   stats_.seconds_extend += seconds_since(t0);
   if (!work.empty()) associator_.map_changed();  // features were created, extended, joined
 
+  relinearize(false);
+
   record(data);
   return true;
+}
+
+bool Slam::relinearize(bool end_of_data) {
+  if (!problem_ || finished_) return false;
+  finished_ = end_of_data;
+  const auto t0 = Clock::now();
+  if (problem_->end_of_step(end_of_data)) {  // a re-linearising estimator moved everything
+    problem_->smoothed(trajectory_, evaluated_,
+                       ground_truth_sensor_ >= 0 ? &sensors_[ground_truth_sensor_].config.mount : nullptr);
+    associator_.map_changed();
+  }
+  stats_.seconds_update += seconds_since(t0);
+  return false;
 }
 
 // ---- Phase 1: predict ------------------------------------------------------
@@ -227,6 +254,7 @@ void Slam::predict(const DataStep& data) {
   const double dt = started_ ? data.t - t_ : 0.0;
   started_ = true;
   t_ = data.t;
+  if (problem_) problem_->motion(data.odometry, dt, trajectory_.size());
   if (data.odometry.size() == 0) return;
   require_finite(data.odometry, "odometry increment", config_.source.instance, *source_lib_);
   const MotionPrediction pred = guarded(config_.motion.instance, *motion_lib_, "predict",
@@ -325,6 +353,11 @@ void Slam::process_sensor_reading(const SensorReading& reading, int sensor_index
   record_health(sensor_index, w, extract_seconds);
 
   t0 = Clock::now();
+  if (problem_)
+    for (const Match& m : w.matches)
+      if (features_[m.feature].feature->mspace_dim() > 0)
+        problem_->observed(features_[m.feature], w.measurements[m.measurement], sensor_index, m.candidate.innovation,
+                           m.candidate.C_eta, m.candidate.J_state);
   update(w.matches);
   stats_.seconds_update += seconds_since(t0);
   if (!w.matches.empty()) associator_.map_changed();  // the update moved features
@@ -405,6 +438,7 @@ void Slam::update(std::vector<Match>& matches) {
   }
   for (std::size_t i = 0; i < dofs_.size(); ++i) x_r_[dofs_[i]] += dx[static_cast<Eigen::Index>(i)];
   for (int a = kTheta; a <= kPsi; ++a) x_r_[a] = wrap_angle(x_r_[a]);
+  if (problem_) problem_->moved(dx);
   for (MapFeature& mf : features_) {  // eq. 24: x_f += B̃ δx_p
     if (mf.state_idx.empty()) continue;
     Eigen::VectorXd dx_p(static_cast<Eigen::Index>(mf.state_idx.size()));
@@ -509,6 +543,7 @@ void Slam::extend(const std::vector<int>& touched) {
     }
     const int first =
         guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
+    if (problem_) problem_->extended(mf, aug, first);
     for (int i = 0; i < n; ++i) mf.own_idx.push_back(first + i);  // new own dims precede shared groups
     rebuild_state_idx(mf);
     ++stats_.extended;
@@ -528,6 +563,7 @@ void Slam::remove_state_rows(std::vector<int> rows) {
   if (rows.empty()) return;
   std::sort(rows.begin(), rows.end());
   guarded(config_.estimator.instance, *estimator_lib_, "remove", [&] { estimator_->remove(rows); });
+  if (problem_) problem_->removed(rows);
   const auto renumber = [&](std::vector<int>& idx) {
     for (int& i : idx) i -= static_cast<int>(std::lower_bound(rows.begin(), rows.end(), i) - rows.begin());
   };
@@ -610,6 +646,7 @@ bool Slam::try_join(int a, int ba, int b, int bb) {
   for (std::size_t j = 0; j < old_b.size(); ++j) J_corner.col(column(old_b[j])) += Jb.col(static_cast<Eigen::Index>(j));
 
   const int old_dim_a = ma.feature->mspace_dim(), old_dim_b = mb.feature->mspace_dim();
+  if (problem_) problem_->before_join(ma, mb);
   const Eigen::MatrixXd T_a =
       guarded(ta.instance, *ta.library, "share_block", [&] { return ma.feature->share_block(ba, proposal->value); });
   const Eigen::MatrixXd T_b =
@@ -654,6 +691,11 @@ bool Slam::try_join(int a, int ba, int b, int bb) {
   ma.shared[ba] = corner.id;
   mb.shared[bb] = corner.id;
   shared_.push_back(corner);
+  if (problem_) {  // the join is a change of variables of the problem
+    rebuild_state_idx(ma);
+    rebuild_state_idx(mb);
+    problem_->joined(ma, mb, obsolete);
+  }
   remove_state_rows(obsolete);  // also rebuilds every state_idx
   ++stats_.joined;
   log_->debug("step ", step_, ": ", ta.instance, " #", ma.id, " block ", ba, " and ", tb.instance, " #", mb.id,

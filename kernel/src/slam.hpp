@@ -35,6 +35,8 @@
 
 namespace mspace::kernel {
 
+class Problem;
+
 /// One feature in the map, as the kernel tracks it.
 struct MapFeature {
   int id = 0;
@@ -142,6 +144,10 @@ class Slam {
   std::size_t skipped_records() const;
   /// Health report of every sensor (measurements, matches, NIS, warnings).
   std::vector<SensorHealthReport> sensor_health() const;
+  /// The nonlinear problem (problem.hpp), recorded only for an estimator
+  /// that wants it; nullptr otherwise.
+  const Problem* problem() const { return problem_.get(); }
+  Problem* problem() { return problem_.get(); }
 
  private:
   struct Match;
@@ -163,6 +169,8 @@ class Slam {
   void rebuild_state_idx(MapFeature& mf) const;
   void prune_tentative();
   void record(const DataStep& data);
+  /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
+  bool relinearize(bool end_of_data);
   SensorView sensor_view(int sensor_index, double t) const;
 
   RunConfig config_;
@@ -171,6 +179,8 @@ class Slam {
   std::shared_ptr<DataSource> source_;
   std::shared_ptr<MotionModel> motion_;
   std::shared_ptr<Estimator> estimator_;
+  std::unique_ptr<Problem> problem_;  ///< only when estimator_->wants_problem()
+  bool finished_ = false;             ///< the end-of-data relinearize() ran
   std::vector<std::shared_ptr<Logger>> plugin_loggers_;
   std::vector<FeatureTypeSlot> types_;
   std::vector<SensorSlot> sensors_;

@@ -40,7 +40,7 @@
 // basis) so that the basis grows by appending a column.
 //
 // Observability-constrained mode (optional; Huang, Mourikis & Roumeliotis,
-// IJRR 2010), as in plugins/ekf (see ekf_filter.hpp): the unobservable
+// IJRR 2010), as in plugins/ekf (see mspace/ekf_filter.hpp): the unobservable
 // directions U (dim() × u) are a plain per-row matrix, independent of the
 // partition into A and B, so they are carried beside it (predict() maps the
 // robot rows, augment() appends J U[idx], remove() drops rows) and every
@@ -48,7 +48,7 @@
 // the update sees it. Off by default; off, or before set_unobservable(), the
 // filter is the plain CEKF bit for bit.
 //
-// Errors: as plugins/ekf (see ekf_filter.hpp), with "cekf" in place of "ekf",
+// Errors: as plugins/ekf (see mspace/ekf_filter.hpp), with "cekf" in place of "ekf",
 // e.g. "cekf update: observation 2: J row 1 is not finite"; all thrown before
 // the covariance changes. An update whose S is not positive definite may
 // have activated rows before it throws: that changes the representation, not

@@ -1,7 +1,7 @@
 // ekf_plugin.cpp — the plugin descriptor of the `ekf` estimator.
 #include <memory>
 
-#include "ekf_filter.hpp"
+#include "mspace/ekf_filter.hpp"
 #include "mspace/plugin_export.hpp"
 
 namespace {

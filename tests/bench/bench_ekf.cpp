@@ -18,7 +18,7 @@
 #include <random>
 #include <vector>
 
-#include "../../plugins/ekf/ekf_filter.hpp"
+#include "mspace/ekf_filter.hpp"
 
 namespace {
 

@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "../../plugins/cekf/cekf_filter.hpp"
-#include "../../plugins/ekf/ekf_filter.hpp"
+#include "mspace/ekf_filter.hpp"
 
 namespace {
 

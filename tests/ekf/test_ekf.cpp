@@ -1,4 +1,4 @@
-// Tests of the M-space EKF (plugins/ekf/ekf_filter.cpp) against the dense
+// Tests of the M-space EKF (sdk/src/ekf_filter.cpp) against the dense
 // textbook Kalman filter: x⁺ = x + K(z − Hx), P⁺ = (I − KH)P, computed here
 // with full matrices and no knowledge of the filter's storage.
 #include <gtest/gtest.h>
@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "../../plugins/ekf/ekf_filter.hpp"
+#include "mspace/ekf_filter.hpp"
 
 namespace {
 

@@ -11,8 +11,10 @@
 #include <Eigen/Core>
 
 // The major version changes with every change of the plugin interfaces'
-// layout (2: DataSource::recorded_mounts; 3: SavedFeature::arrays and
-// SavedFeature::version, the dense information of map files).
+// layout (2: DataSource::recorded_mounts; 3, all from one session:
+// SavedFeature::arrays and SavedFeature::version, the dense information of
+// map files; Estimator::wants_problem and relinearize, mspace/problem.hpp,
+// EkfFilter in the SDK library; DataStep::odometry_covariance).
 #define MSPACE_SDK_VERSION_MAJOR 3
 #define MSPACE_SDK_VERSION_MINOR 0
 

@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "mspace/plugin.hpp"
+#include "mspace/problem.hpp"
 
 namespace mspace {
 
@@ -60,6 +61,24 @@ class Estimator : public PluginObject {
   /// estimators", IJRR 2010) carry them through predict, augment and remove;
   /// the others ignore them.
   virtual void set_unobservable(const Eigen::MatrixXd& /*U_r*/) {}
+
+  // ---- Re-linearisation (mspace/problem.hpp) --------------------------------
+  //
+  // An estimator that re-linearises (a smoother) says so here; the kernel then
+  // records the nonlinear problem — pose nodes, motion, observation and
+  // linear factors — alongside the calls above. Filters keep the default and
+  // the kernel records nothing, so they pay nothing for it.
+  virtual bool wants_problem() const { return false; }
+  /// Called when wants_problem(): after phase 4 (extend and shared
+  /// coordinates) of every step that added a pose node, and once more with
+  /// end_of_data when the data ends (the last chance to optimise). The
+  /// estimator may linearise any factor at the current values and move every
+  /// variable with problem.retract() (as often as it iterates); it must leave
+  /// its own covariance over [0, dim()) consistent with the values it leaves
+  /// behind. Returns true when it moved anything: the kernel then takes the
+  /// current robot pose and the pose nodes (the smoothed trajectory) from the
+  /// problem.
+  virtual bool relinearize(NonlinearProblem& /*problem*/, bool /*end_of_data*/) { return false; }
 };
 
 }  // namespace mspace

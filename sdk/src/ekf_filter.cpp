@@ -1,5 +1,5 @@
 // ekf_filter.cpp — the M-space EKF, T-RO 2007 §V-B, eqs. 23–32.
-#include "ekf_filter.hpp"
+#include "mspace/ekf_filter.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
@@ -153,6 +153,12 @@ void EkfFilter::reserve(int rows) {
 
 Eigen::MatrixXd EkfFilter::covariance() const {
   return store_.topLeftCorner(n_, n_).selfadjointView<Eigen::Lower>();
+}
+
+void EkfFilter::assign(const Eigen::MatrixXd& C) {
+  estimator_support::require_size(C, n_, n_, "ekf assign", "C");
+  estimator_support::require_finite(C, "ekf assign", "C");
+  store_.topLeftCorner(n_, n_).triangularView<Eigen::Lower>() = C;
 }
 
 Eigen::MatrixXd EkfFilter::gather_columns(const std::vector<int>& cols) const {

@@ -1,4 +1,6 @@
-// ekf_filter.hpp — the M-space extended Kalman filter (T-RO 2007, §V-B).
+// mspace/ekf_filter.hpp — the M-space extended Kalman filter (T-RO 2007, §V-B),
+// in the SDK library because two estimator plugins use it: `ekf` and the
+// `smoother` (its running covariance for gating between re-optimisations).
 //
 // The filter estimates the covariance of the state perturbation (eq. 23)
 //
@@ -74,6 +76,10 @@ class EkfFilter final : public Estimator {
   void reserve(int rows);
   /// The whole covariance C_state (dim() × dim()), for tests and diagnostics.
   Eigen::MatrixXd covariance() const;
+  /// Replaces the whole covariance by C (dim() × dim(), symmetric, read from
+  /// its lower triangle), e.g. the marginal of an optimised information
+  /// matrix (the smoother). The state dimension and U stay as they are.
+  void assign(const Eigen::MatrixXd& C);
   bool observability_constrained() const { return constrained_; }
   /// The unobservable directions U (dim() × u) in observability-constrained
   /// mode; 0 × 0 otherwise.

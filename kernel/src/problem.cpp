@@ -1,0 +1,518 @@
+// problem.cpp — pose nodes and factors of the nonlinear problem (problem.hpp).
+#include "problem.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+
+#include "mspace/transform.hpp"
+#include "slam.hpp"
+
+namespace mspace::kernel {
+
+struct Problem::Factor {
+  FactorKind kind = FactorKind::Linear;
+  bool live = false;    ///< observation: re-linearised in full (else its last linearisation)
+  bool robust = false;  ///< an observation (live or frozen)
+  // observation
+  int feature_id = 0;
+  std::shared_ptr<Feature> feature;
+  int type = 0;
+  Measurement m;
+  int sensor = 0;
+  int node = 0;
+  std::vector<int> rows;  ///< the feature's state_idx when recorded
+  int dim = 0;            ///< the feature's M-space dimension when recorded
+  // motion
+  int from = 0, to = 0;
+  std::vector<std::pair<Eigen::VectorXd, double>> odometry;
+  std::vector<std::size_t> odometry_records;  ///< trajectory index of each increment
+  // The linearisation r = eta + J (x ⊟ x_lin): linear factors always, live
+  // observations their newest one (kept for freezing). Columns: k per node
+  // in lin_nodes, then one per estimator row in lin_rows.
+  Eigen::VectorXd eta;
+  Eigen::MatrixXd J, C;
+  std::vector<int> lin_nodes;
+  std::vector<Pose6> node_base;
+  std::vector<int> lin_rows;
+  Eigen::VectorXd row_base;
+};
+
+namespace {
+
+Eigen::MatrixXd select_columns(const Mat6& J, const std::vector<int>& dofs) {
+  Eigen::MatrixXd out(6, static_cast<Eigen::Index>(dofs.size()));
+  for (std::size_t j = 0; j < dofs.size(); ++j) out.col(static_cast<Eigen::Index>(j)) = J.col(dofs[j]);
+  return out;
+}
+
+void add_to_pose(Pose6& x, const std::vector<int>& dofs, const Eigen::Ref<const Eigen::VectorXd>& d) {
+  for (std::size_t i = 0; i < dofs.size(); ++i) x[dofs[i]] += d[static_cast<Eigen::Index>(i)];
+  for (int a = kTheta; a <= kPsi; ++a) x[a] = wrap_angle(x[a]);
+}
+
+}  // namespace
+
+Problem::Problem(Context context) : c_(std::move(context)), k_(static_cast<int>(c_.dofs.size())) {}
+
+Problem::~Problem() = default;
+
+int Problem::state_dim() const { return c_.estimator->dim(); }
+
+int Problem::tangent_dim() const {
+  const int past = static_cast<int>(nodes_.size()) - (current_ ? 1 : 0);
+  return state_dim() + k_ * past;
+}
+
+int Problem::pose_node_index(int node) const {
+  if (current_ && node == static_cast<int>(nodes_.size()) - 1) return 0;
+  return state_dim() + k_ * node;
+}
+
+Pose6 Problem::node_value(int node) const {
+  if (current_ && node == static_cast<int>(nodes_.size()) - 1) return *c_.x_r;
+  return nodes_[static_cast<std::size_t>(node)];
+}
+
+int Problem::live_observation_factors() const {
+  return static_cast<int>(std::count_if(factors_.begin(), factors_.end(), [](const auto& f) { return f->live; }));
+}
+
+bool Problem::live_factors_match_features() const {
+  std::unordered_map<int, const MapFeature*> by_id;
+  for (const MapFeature& mf : *c_.features) by_id[mf.id] = &mf;
+  for (const auto& f : factors_) {
+    if (!f->live) continue;
+    const auto it = by_id.find(f->feature_id);
+    if (it == by_id.end() || it->second->feature->mspace_dim() != f->dim || it->second->state_idx != f->rows)
+      return false;
+  }
+  return true;
+}
+
+void Problem::sync_rows() {
+  const int n = state_dim();
+  const auto old = acc_.size();
+  if (old == n) return;
+  acc_.conservativeResize(n);
+  if (n > old) acc_.tail(n - old).setZero();
+}
+
+// ---- recording ----------------------------------------------------------------
+
+void Problem::start(const Eigen::MatrixXd& P0) {
+  sync_rows();
+  nodes_ = {*c_.x_r};
+  records_ = {0};
+  current_ = true;
+  auto f = std::make_unique<Factor>();
+  f->kind = FactorKind::Prior;
+  f->eta = Eigen::VectorXd::Zero(k_);
+  f->J = Eigen::MatrixXd::Identity(k_, k_);
+  // A zero initial σ (the map frame defined by the first pose) is kept as a
+  // very stiff prior (σ = 1 µm / 1 µrad) so that C stays invertible.
+  f->C = P0 + 1e-12 * Eigen::MatrixXd::Identity(k_, k_);
+  f->lin_nodes = {0};
+  f->node_base = {*c_.x_r};
+  factors_.push_back(std::move(f));
+}
+
+void Problem::motion(const Eigen::VectorXd& x_d, double dt, std::size_t record) {
+  if (x_d.size() == 0 || nodes_.empty()) return;
+  if (current_) {  // the newest node keeps the value it has before the robot moves
+    nodes_.back() = *c_.x_r;
+    current_ = false;
+  }
+  pending_.emplace_back(x_d, dt);
+  pending_records_.push_back(record);
+}
+
+void Problem::key_pose(std::size_t record) {
+  if (nodes_.empty()) return;
+  if (current_) {  // no motion since the newest node: it stands for this step too
+    records_.back() = record;
+    return;
+  }
+  nodes_.push_back(*c_.x_r);
+  records_.push_back(record);
+  current_ = true;
+  node_this_step_ = true;
+  auto f = std::make_unique<Factor>();
+  f->kind = FactorKind::Motion;
+  f->from = static_cast<int>(nodes_.size()) - 2;
+  f->to = static_cast<int>(nodes_.size()) - 1;
+  f->odometry = std::move(pending_);
+  f->odometry_records = std::move(pending_records_);
+  pending_.clear();
+  pending_records_.clear();
+  factors_.push_back(std::move(f));
+}
+
+void Problem::observed(const MapFeature& mf, const Measurement& m, int sensor, const Innovation& in,
+                       const Eigen::MatrixXd& C_eta, const Eigen::MatrixXd& J_state) {
+  sync_rows();
+  if (!current_) throw std::logic_error("problem: an observation without a pose node");
+  auto f = std::make_unique<Factor>();
+  f->kind = FactorKind::Observation;
+  f->live = true;
+  f->robust = true;
+  f->feature_id = mf.id;
+  f->feature = mf.feature;
+  f->type = mf.type;
+  // The innovation reads v, C_v, kind and flags; the dense evidence belongs
+  // to phase 3 and is not kept.
+  f->m.kind = m.kind;
+  f->m.v = m.v;
+  f->m.C_v = m.C_v;
+  f->m.flags = m.flags;
+  f->sensor = sensor;
+  f->node = static_cast<int>(nodes_.size()) - 1;
+  f->rows = mf.state_idx;
+  f->dim = mf.feature->mspace_dim();
+  f->eta = in.eta;
+  f->J = J_state;
+  f->C = C_eta;
+  f->lin_nodes = {f->node};
+  f->node_base = {*c_.x_r};
+  f->lin_rows = f->rows;
+  f->row_base = acc_(f->rows);
+  factors_.push_back(std::move(f));
+}
+
+void Problem::moved(const Eigen::VectorXd& dx) {
+  sync_rows();
+  acc_ += dx;
+}
+
+void Problem::freeze(Factor& f) {
+  if (!f.live) return;
+  f.live = false;
+  ++frozen_;
+}
+
+void Problem::freeze_feature(int feature_id) {
+  for (auto& f : factors_)
+    if (f->live && f->feature_id == feature_id) freeze(*f);
+}
+
+void Problem::extended(const MapFeature& mf, const StateAugmentation& aug, int first) {
+  sync_rows();
+  freeze_feature(mf.id);
+  // δx_new − J_sensor J_sr δx_r − J_own δx_p,old = w ~ N(0, C_new): a linear
+  // factor on the current node, the old rows and the new rows, zero at the
+  // values of this moment (the extension's own estimate).
+  const auto n = aug.C_new.rows();
+  auto f = std::make_unique<Factor>();
+  f->kind = FactorKind::Linear;
+  bool robot = false;
+  for (int i : aug.idx) {
+    if (i < k_) {
+      robot = true;
+    } else if (std::find(f->lin_rows.begin(), f->lin_rows.end(), i) == f->lin_rows.end()) {
+      f->lin_rows.push_back(i);
+    }
+  }
+  for (Eigen::Index i = 0; i < n; ++i) f->lin_rows.push_back(first + static_cast<int>(i));
+  const int node_cols = robot ? k_ : 0;
+  f->J = Eigen::MatrixXd::Zero(n, node_cols + static_cast<Eigen::Index>(f->lin_rows.size()));
+  const auto col_of_row = [&](int row) {
+    return node_cols + static_cast<Eigen::Index>(std::find(f->lin_rows.begin(), f->lin_rows.end(), row) -
+                                                 f->lin_rows.begin());
+  };
+  for (std::size_t j = 0; j < aug.idx.size(); ++j) {
+    const int i = aug.idx[j];
+    const Eigen::Index col = i < k_ ? i : col_of_row(i);
+    f->J.col(col) -= aug.J.col(static_cast<Eigen::Index>(j));
+  }
+  for (Eigen::Index i = 0; i < n; ++i) f->J(i, col_of_row(first + static_cast<int>(i))) += 1.0;
+  f->eta = Eigen::VectorXd::Zero(n);
+  f->C = aug.C_new;
+  if (robot) {
+    f->lin_nodes = {static_cast<int>(nodes_.size()) - 1};
+    f->node_base = {node_value(f->lin_nodes.front())};
+  }
+  f->row_base = acc_(f->lin_rows);
+  factors_.push_back(std::move(f));
+}
+
+void Problem::before_join(const MapFeature& a, const MapFeature& b) {
+  join_a_ = a.id;
+  join_b_ = b.id;
+  B_a_ = a.feature->B();
+  B_b_ = b.feature->B();
+  old_idx_a_ = a.state_idx;
+  old_idx_b_ = b.state_idx;
+  x_a_ = a.feature->coords();
+  x_b_ = b.feature->coords();
+}
+
+// Folds the perturbations since the factor's linearisation into eta, so that
+// its linearisation point is the current values.
+void Problem::rebase(Factor& f) {
+  FactorLinearization lin;
+  evaluate_linear(f, lin);
+  f.eta = lin.eta;
+  for (std::size_t i = 0; i < f.lin_nodes.size(); ++i) f.node_base[i] = node_value(f.lin_nodes[i]);
+  f.row_base = acc_(f.lin_rows);
+}
+
+void Problem::joined(const MapFeature& a, const MapFeature& b, std::vector<int> obsolete) {
+  sync_rows();
+  std::sort(obsolete.begin(), obsolete.end());
+  freeze_feature(a.id);
+  freeze_feature(b.id);
+  // Old perturbations as functions of the new ones: δx_f = B̃_old δp_old =
+  // B̃_new δp_new, so δp_old = B_old B̃_new δp_new (eqs. 10–12); share_block
+  // also moved x_f (the end point onto the common value), which in the old
+  // rows is the jump B_old Δx_f.
+  struct Side {
+    const std::vector<int>* old_idx;
+    const std::vector<int>* new_idx;
+    Eigen::MatrixXd M;
+    Eigen::VectorXd jump;
+  };
+  const Side sides[2] = {
+      {&old_idx_a_, &a.state_idx, B_a_ * a.feature->B_dual(), B_a_ * (a.feature->coords() - x_a_)},
+      {&old_idx_b_, &b.state_idx, B_b_ * b.feature->B_dual(), B_b_ * (b.feature->coords() - x_b_)}};
+  const auto is_obsolete = [&](int row) { return std::binary_search(obsolete.begin(), obsolete.end(), row); };
+
+  for (auto& fp : factors_) {
+    Factor& f = *fp;
+    if (f.kind == FactorKind::Motion || f.live) continue;
+    if (std::none_of(f.lin_rows.begin(), f.lin_rows.end(), is_obsolete)) continue;
+    rebase(f);
+    const int node_cols = k_ * static_cast<int>(f.lin_nodes.size());
+    // The jump of the old rows, once per row (a row may be in both features).
+    std::vector<int> jumped;
+    for (const Side& s : sides) {
+      for (std::size_t p = 0; p < s.old_idx->size(); ++p) {
+        const int row = (*s.old_idx)[p];
+        const auto it = std::find(f.lin_rows.begin(), f.lin_rows.end(), row);
+        if (it == f.lin_rows.end() || std::find(jumped.begin(), jumped.end(), row) != jumped.end()) continue;
+        jumped.push_back(row);
+        f.eta += f.J.col(node_cols + (it - f.lin_rows.begin())) * s.jump[static_cast<Eigen::Index>(p)];
+      }
+    }
+    // Substitute the obsolete columns.
+    std::vector<int> rows;
+    for (int row : f.lin_rows)
+      if (!is_obsolete(row)) rows.push_back(row);
+    for (const Side& s : sides)
+      for (int row : *s.new_idx)
+        if (std::find(rows.begin(), rows.end(), row) == rows.end()) rows.push_back(row);
+    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(f.J.rows(), node_cols + static_cast<Eigen::Index>(rows.size()));
+    J.leftCols(node_cols) = f.J.leftCols(node_cols);
+    const auto col_of = [&](int row) {
+      return node_cols + static_cast<Eigen::Index>(std::find(rows.begin(), rows.end(), row) - rows.begin());
+    };
+    std::vector<bool> done(f.lin_rows.size(), false);
+    for (std::size_t j = 0; j < f.lin_rows.size(); ++j) {
+      const int row = f.lin_rows[j];
+      const Eigen::VectorXd col = f.J.col(node_cols + static_cast<Eigen::Index>(j));
+      if (!is_obsolete(row)) {
+        J.col(col_of(row)) += col;
+        continue;
+      }
+      for (const Side& s : sides) {
+        const auto p = std::find(s.old_idx->begin(), s.old_idx->end(), row) - s.old_idx->begin();
+        if (p == static_cast<std::ptrdiff_t>(s.old_idx->size())) continue;
+        for (std::size_t q = 0; q < s.new_idx->size(); ++q)
+          J.col(col_of((*s.new_idx)[q])) += col * s.M(p, static_cast<Eigen::Index>(q));
+        break;
+      }
+    }
+    f.J = J;
+    f.lin_rows = rows;
+    f.row_base = acc_(f.lin_rows);
+  }
+}
+
+void Problem::removed(const std::vector<int>& rows) {
+  if (rows.empty()) return;
+  // acc_ still has the rows (synced before the removal).
+  std::vector<Eigen::Index> keep;
+  for (Eigen::Index i = 0; i < acc_.size(); ++i)
+    if (!std::binary_search(rows.begin(), rows.end(), static_cast<int>(i))) keep.push_back(i);
+  acc_ = acc_(keep).eval();
+  const auto renumber = [&](std::vector<int>& idx) {
+    for (int& i : idx) {
+      if (std::binary_search(rows.begin(), rows.end(), i))
+        throw std::logic_error("problem: a factor still uses removed estimator row " + std::to_string(i));
+      i -= static_cast<int>(std::lower_bound(rows.begin(), rows.end(), i) - rows.begin());
+    }
+  };
+  for (auto& f : factors_) {
+    if (f->live) renumber(f->rows);
+    else f->rows.clear();  // a frozen factor only has its linearisation's rows
+    renumber(f->lin_rows);
+  }
+}
+
+bool Problem::end_of_step(bool end_of_data) {
+  if (!node_this_step_ && !end_of_data) return false;
+  node_this_step_ = false;
+  sync_rows();
+  if (end_of_data && !current_) return false;  // the robot moved on from the newest node: nothing to index it by
+  return guarded(c_.estimator_instance, *c_.estimator_lib, "relinearize",
+                 [&] { return c_.estimator->relinearize(*this, end_of_data); });
+}
+
+void Problem::smoothed(std::vector<StampedPose>& trajectory, std::vector<StampedPose>& evaluated,
+                       const Pose6* eval_mount) const {
+  const auto write = [&](std::size_t r, const Pose6& x) {
+    if (r < trajectory.size()) trajectory[r].pose = x;
+    if (r < evaluated.size()) evaluated[r].pose = eval_mount != nullptr ? compound(x, *eval_mount) : x;
+  };
+  // Steps between two nodes: the motion model from the earlier node, the
+  // mismatch at the later one spread over the increments.
+  std::vector<Pose6> poses;
+  for (const auto& f : factors_) {
+    if (f->kind != FactorKind::Motion || f->odometry.empty()) continue;
+    poses.clear();
+    Pose6 x = node_value(f->from);
+    for (const auto& [u, dt] : f->odometry) {
+      x = guarded(c_.motion_instance, *c_.motion_lib, "predict", [&] { return c_.motion->predict(x, u, dt); }).pose;
+      poses.push_back(x);
+    }
+    const Pose6 mismatch = pose_difference(node_value(f->to), x);
+    const double m = static_cast<double>(poses.size());
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      Pose6 p = poses[i];
+      for (int d : c_.dofs) p[d] += mismatch[d] * static_cast<double>(i + 1) / m;
+      for (int a = kTheta; a <= kPsi; ++a) p[a] = wrap_angle(p[a]);
+      write(f->odometry_records[i], p);
+    }
+  }
+  for (int node = 0; node < num_pose_nodes(); ++node) write(records_[static_cast<std::size_t>(node)], node_value(node));
+}
+
+// ---- linearisation ------------------------------------------------------------
+
+void Problem::evaluate_linear(const Factor& f, FactorLinearization& out) const {
+  const int node_cols = k_ * static_cast<int>(f.lin_nodes.size());
+  Eigen::VectorXd v(node_cols + static_cast<Eigen::Index>(f.lin_rows.size()));
+  out.idx.clear();
+  for (std::size_t i = 0; i < f.lin_nodes.size(); ++i) {
+    const Pose6 d = pose_difference(node_value(f.lin_nodes[i]), f.node_base[i]);
+    const int first = pose_node_index(f.lin_nodes[i]);
+    for (int j = 0; j < k_; ++j) {
+      v[k_ * static_cast<Eigen::Index>(i) + j] = d[c_.dofs[static_cast<std::size_t>(j)]];
+      out.idx.push_back(first + j);
+    }
+  }
+  for (std::size_t j = 0; j < f.lin_rows.size(); ++j) {
+    v[node_cols + static_cast<Eigen::Index>(j)] = acc_[f.lin_rows[j]] - f.row_base[static_cast<Eigen::Index>(j)];
+    out.idx.push_back(f.lin_rows[j]);
+  }
+  out.kind = f.kind == FactorKind::Prior ? FactorKind::Prior : FactorKind::Linear;
+  out.robust = f.robust;
+  out.eta = f.eta + f.J * v;
+  out.J = f.J;
+  out.C = f.C;
+}
+
+void Problem::store_linearisation(Factor& f, const FactorLinearization& lin) {
+  f.eta = lin.eta;
+  f.J = lin.J;
+  f.C = lin.C;
+  f.node_base = {node_value(f.node)};
+  f.row_base = acc_(f.lin_rows);
+}
+
+bool Problem::evaluate_observation(Factor& f, FactorLinearization& out) {
+  const FeatureTypeSlot& type = (*c_.types)[static_cast<std::size_t>(f.type)];
+  const Feature& feature = *f.feature;
+  Mat6 J_sr;
+  const Pose6 x_ms = compound(node_value(f.node), c_.mounts[static_cast<std::size_t>(f.sensor)], &J_sr);  // eq. 17
+  const CoordLayout& layout = feature.layout();
+  Eigen::MatrixXd J_of, J_os;
+  const Eigen::VectorXd x_o = to_sensor_frame(layout, feature.coords(), x_ms, &J_of, &J_os);  // eqs. 7–9
+  Innovation in;
+  const bool ok = guarded(type.instance, *type.library, "innovation", [&] { return feature.innovation(x_o, f.m, in); });
+  const auto m = in.eta.size();
+  if (!ok || m == 0 || in.J_eta_o.rows() != m || in.J_eta_o.cols() != layout.size() || in.J_eta_v.rows() != m ||
+      in.J_eta_v.cols() != f.m.v.size() || !in.eta.allFinite() || !in.J_eta_o.allFinite())
+    return false;
+  const Eigen::MatrixXd Bd = guarded(type.instance, *type.library, "B_dual", [&] { return feature.B_dual(); });
+  Eigen::MatrixXd A(layout.size(), k_ + Bd.cols());
+  A.leftCols(k_) = J_os * select_columns(J_sr, c_.dofs);
+  A.rightCols(Bd.cols()) = J_of * Bd;
+  out.kind = FactorKind::Observation;
+  out.robust = true;
+  out.eta = in.eta;
+  out.J = in.J_eta_o * A;  // eq. 30: J_ηo (J_os J_sr  J_of B̃)
+  out.C = in.J_eta_v * f.m.C_v * in.J_eta_v.transpose();
+  out.idx.clear();
+  for (int j = 0; j < k_; ++j) out.idx.push_back(pose_node_index(f.node) + j);
+  out.idx.insert(out.idx.end(), f.rows.begin(), f.rows.end());
+  store_linearisation(f, out);
+  return true;
+}
+
+bool Problem::evaluate_motion(const Factor& f, FactorLinearization& out) {
+  // x_j − g(x_i, u…): the motion model run from node i over the stored
+  // increments, J_i = −∏ J_rr, C = Σ chained J_rd C_d J_rdᵀ (eqs. 25–27).
+  Pose6 x = node_value(f.from);
+  Eigen::MatrixXd chain = Eigen::MatrixXd::Identity(k_, k_);
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(k_, k_);
+  for (const auto& [u, dt] : f.odometry) {
+    const MotionPrediction p =
+        guarded(c_.motion_instance, *c_.motion_lib, "predict", [&] { return c_.motion->predict(x, u, dt); });
+    chain = p.J_rr * chain;
+    C = p.J_rr * C * p.J_rr.transpose() + p.J_rd * p.C_d * p.J_rd.transpose();
+    x = p.pose;
+  }
+  const Pose6 d = pose_difference(node_value(f.to), x);
+  out.kind = FactorKind::Motion;
+  out.robust = false;
+  out.eta.resize(k_);
+  for (int j = 0; j < k_; ++j) out.eta[j] = d[c_.dofs[static_cast<std::size_t>(j)]];
+  out.J.resize(k_, 2 * k_);
+  out.J.leftCols(k_) = -chain;
+  out.J.rightCols(k_).setIdentity();
+  out.C = C + 1e-12 * Eigen::MatrixXd::Identity(k_, k_);
+  out.idx.clear();
+  for (int j = 0; j < k_; ++j) out.idx.push_back(pose_node_index(f.from) + j);
+  for (int j = 0; j < k_; ++j) out.idx.push_back(pose_node_index(f.to) + j);
+  return true;
+}
+
+bool Problem::linearize(int i, FactorLinearization& out) {
+  if (i < 0 || i >= num_factors()) throw std::out_of_range("problem: factor " + std::to_string(i) + " does not exist");
+  sync_rows();
+  Factor& f = *factors_[static_cast<std::size_t>(i)];
+  if (f.kind == FactorKind::Motion) return evaluate_motion(f, out);
+  // The frozen-factor rule, checked again here: a feature that changed its
+  // M-space since the factor was recorded no longer re-linearises it.
+  if (f.live && f.feature->mspace_dim() != f.dim) freeze(f);
+  if (f.live && evaluate_observation(f, out)) return true;
+  // Frozen, or rejected at the current values: the last linearisation.
+  evaluate_linear(f, out);
+  if (f.kind == FactorKind::Observation) out.kind = FactorKind::Observation;
+  return true;
+}
+
+void Problem::retract(const Eigen::VectorXd& delta) {
+  sync_rows();
+  if (delta.size() != tangent_dim())
+    throw std::invalid_argument("problem retract: delta has " + std::to_string(delta.size()) + " rows, expected " +
+                                std::to_string(tangent_dim()));
+  if (!delta.allFinite()) throw std::invalid_argument("problem retract: delta is not finite");
+  const int n = state_dim();
+  for (int node = 0; node < num_pose_nodes(); ++node) {
+    const int first = pose_node_index(node);
+    if (first == 0) continue;
+    add_to_pose(nodes_[static_cast<std::size_t>(node)], c_.dofs, delta.segment(first, k_));
+  }
+  add_to_pose(*c_.x_r, c_.dofs, delta.head(k_));
+  acc_.tail(n - k_) += delta.segment(k_, n - k_);
+  for (MapFeature& mf : *c_.features) {  // eq. 24: x_f += B̃(x_f) δx_p
+    if (mf.state_idx.empty()) continue;
+    const Eigen::VectorXd dx_p = delta(mf.state_idx);
+    const FeatureTypeSlot& type = (*c_.types)[static_cast<std::size_t>(mf.type)];
+    guarded(type.instance, *type.library, "apply_perturbation", [&] { mf.feature->apply_perturbation(dx_p); });
+  }
+}
+
+}  // namespace mspace::kernel

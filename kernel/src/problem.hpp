@@ -1,0 +1,160 @@
+// problem.hpp — the nonlinear SLAM problem (pose nodes and factors) the
+// kernel records for an estimator that re-linearises (mspace/problem.hpp).
+//
+// Recorded only when the estimator's wants_problem() is true: the EKF family
+// pays nothing. Slam calls one method per phase:
+//   predict   motion()      stores the step's odometry increment (and fixes
+//                           the value of the newest node before it moves);
+//             key_pose()    a step with readings: a new pose node, the motion
+//                           factor from the previous node over the stored
+//                           increments;
+//   update    observed()    one observation factor per matched feature in the
+//                           estimator, with the EKF's linearisation as its
+//                           first one; moved() accumulates the update;
+//   extend    extended()    the extension's prior as a linear factor; every
+//                           live factor of the feature is frozen;
+//   join      before_join() / joined(): the change of variables of T-RO §VI;
+//             removed()     renumbers rows;
+//   end       end_of_step() hands the problem to Estimator::relinearize().
+//
+// The frozen-factor rule. An observation factor is re-linearised in full only
+// while its feature keeps the M-space rows (and dimension) it had when the
+// factor was recorded. When the feature extends or joins, the factor is
+// frozen at its last linearisation (η, J at the values of that moment) and
+// from then on is the linear factor r = η + J (x ⊟ x_lin) on the accumulated
+// perturbations of the rows it touched — as a marginalisation prior would be.
+// It must not inform the new dimensions: the extension's prior (built from the
+// dense information) already holds that evidence, and the innovation may even
+// have other rows at the higher dimension (a wall's end points).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "mspace/estimator.hpp"
+#include "mspace/feature.hpp"
+#include "mspace/motion_model.hpp"
+#include "mspace/problem.hpp"
+#include "evaluation.hpp"
+#include "plugin_registry.hpp"
+
+namespace mspace::kernel {
+
+struct MapFeature;
+struct FeatureTypeSlot;
+
+class Problem final : public NonlinearProblem {
+ public:
+  /// The kernel state the problem reads and moves: the features (by
+  /// reference: Slam keeps them), the current robot pose, the estimated pose
+  /// coordinates, the sensor mounts, and the plugins it calls.
+  struct Context {
+    std::vector<MapFeature>* features = nullptr;
+    const std::vector<FeatureTypeSlot>* types = nullptr;
+    Pose6* x_r = nullptr;
+    std::vector<int> dofs;
+    std::vector<Pose6> mounts;  ///< x_rs by sensor index
+    MotionModel* motion = nullptr;
+    const LoadedPlugin* motion_lib = nullptr;
+    std::string motion_instance;
+    Estimator* estimator = nullptr;
+    const LoadedPlugin* estimator_lib = nullptr;
+    std::string estimator_instance;
+  };
+
+  explicit Problem(Context context);
+  ~Problem() override;
+
+  // ---- recording (Slam) ------------------------------------------------------
+  /// The prior of the first pose node (the current pose) with covariance P0.
+  void start(const Eigen::MatrixXd& P0);
+  /// Before the robot moves by the odometry increment x_d over dt (empty: no
+  /// motion); `record` is the index the step will have in the trajectory.
+  void motion(const Eigen::VectorXd& x_d, double dt, std::size_t record);
+  /// The current pose becomes a pose node (no-op if it already is one);
+  /// `record` is the index the step will have in the kernel's trajectory.
+  void key_pose(std::size_t record);
+  /// An observation factor: feature `mf` (dimension > 0) matched measurement
+  /// `m` of sensor `sensor`; `in`, `C_eta`, `J_state` are the linearisation
+  /// at the current values (J over robot rows then mf.state_idx, eq. 30).
+  void observed(const MapFeature& mf, const Measurement& m, int sensor, const Innovation& in,
+                const Eigen::MatrixXd& C_eta, const Eigen::MatrixXd& J_state);
+  /// The estimator's update moved the robot and the M-space rows by dx.
+  void moved(const Eigen::VectorXd& dx);
+  /// `mf` extended: aug (over robot rows and the old rows) added rows
+  /// [first, first + aug.C_new.rows()). Freezes mf's live factors.
+  void extended(const MapFeature& mf, const StateAugmentation& aug, int first);
+  /// Before share_block: keeps B(x_f) of both features.
+  void before_join(const MapFeature& a, const MapFeature& b);
+  /// After the join's rows were added (a, b with their new state_idx) and
+  /// before the rows `obsolete` are removed: freezes both features' live
+  /// factors and rewrites every factor on an obsolete row through
+  /// δp_old = B_old B̃_new δp_new.
+  void joined(const MapFeature& a, const MapFeature& b, std::vector<int> obsolete);
+  /// Estimator rows `rows` (sorted) were removed; later rows shift down.
+  void removed(const std::vector<int>& rows);
+  /// End of a step: when it added a pose node (or at the end of the data,
+  /// `end_of_data`), Estimator::relinearize(). Returns true when the
+  /// estimator moved the variables.
+  bool end_of_step(bool end_of_data);
+  /// Writes the pose nodes' current values into the recorded trajectory (and
+  /// the evaluated one, x_r ⊕ x_rs with `eval_mount` when given): what a
+  /// smoother reports is its smoothed trajectory. A step between two nodes
+  /// gets the motion model run from the earlier node over the stored
+  /// increments, with the mismatch at the later node spread linearly over the
+  /// increments; steps after the newest node keep what they recorded.
+  void smoothed(std::vector<StampedPose>& trajectory, std::vector<StampedPose>& evaluated,
+                const Pose6* eval_mount) const;
+
+  // ---- NonlinearProblem ------------------------------------------------------
+  int robot_dim() const override { return k_; }
+  int state_dim() const override;
+  int tangent_dim() const override;
+  int num_pose_nodes() const override { return static_cast<int>(nodes_.size()); }
+  int pose_node_index(int node) const override;
+  int num_factors() const override { return static_cast<int>(factors_.size()); }
+  bool linearize(int i, FactorLinearization& out) override;
+  void retract(const Eigen::VectorXd& delta) override;
+
+  /// Counters for tests and the log.
+  int frozen_factors() const { return frozen_; }
+  int live_observation_factors() const;
+  /// The frozen-factor rule holds: every live observation factor's feature
+  /// has the M-space dimension and estimator rows it had when recorded.
+  bool live_factors_match_features() const;
+  /// Value of pose node `node`.
+  Pose6 node_value(int node) const;
+
+ private:
+  struct Factor;
+  void sync_rows();
+  void freeze_feature(int feature_id);
+  void freeze(Factor& f);
+  void rebase(Factor& f);
+  void store_linearisation(Factor& f, const FactorLinearization& lin);
+  bool evaluate_observation(Factor& f, FactorLinearization& out);
+  bool evaluate_motion(const Factor& f, FactorLinearization& out);
+  void evaluate_linear(const Factor& f, FactorLinearization& out) const;
+
+  Context c_;
+  int k_ = 0;
+  std::vector<Pose6> nodes_;  ///< values; the newest is *x_r while current_ is true
+  std::vector<std::size_t> records_;  ///< trajectory index of each node
+  bool current_ = false;      ///< the newest node is the current pose
+  bool node_this_step_ = false;
+  std::vector<std::pair<Eigen::VectorXd, double>> pending_;  ///< odometry since the newest node
+  std::vector<std::size_t> pending_records_;                 ///< their trajectory indices
+  Eigen::VectorXd acc_;  ///< accumulated perturbation of every estimator row (robot rows unused)
+  std::vector<std::unique_ptr<Factor>> factors_;
+  int frozen_ = 0;
+  // before_join()
+  int join_a_ = 0, join_b_ = 0;
+  Eigen::MatrixXd B_a_, B_b_;
+  std::vector<int> old_idx_a_, old_idx_b_;
+  Eigen::VectorXd x_a_, x_b_;
+};
+
+}  // namespace mspace::kernel

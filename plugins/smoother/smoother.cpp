@@ -1,0 +1,241 @@
+// smoother.cpp — periodic robust Gauss–Newton over the kernel's problem (see smoother.hpp).
+#include "smoother.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace mspace::smoother {
+
+namespace {
+
+using SpMat = Eigen::SparseMatrix<double>;
+
+/// ρ(s) and the weight ρ'(s) of a squared Mahalanobis norm s.
+std::pair<double, double> robust(Loss loss, double c, double s) {
+  const double c2 = c * c;
+  switch (loss) {
+    case Loss::Huber:
+      if (s <= c2) return {s, 1.0};
+      return {2.0 * c * std::sqrt(s) - c2, c / std::sqrt(s)};
+    case Loss::Cauchy:
+      return {c2 * std::log1p(s / c2), 1.0 / (1.0 + s / c2)};
+    case Loss::None:
+      break;
+  }
+  return {s, 1.0};
+}
+
+/// The normal equations of all factors at the problem's current values.
+struct Normal {
+  std::vector<Eigen::Triplet<double>> triplets;
+  Eigen::VectorXd g;
+  double cost = 0.0;
+  double by_kind[4] = {0, 0, 0, 0};  ///< ½ Σ ρ by FactorKind
+  int down_weighted = 0;
+};
+
+Normal build(NonlinearProblem& problem, const SmootherOptions& o) {
+  Normal out;
+  const int n = problem.tangent_dim();
+  out.g = Eigen::VectorXd::Zero(n);
+  FactorLinearization lin;
+  for (int i = 0; i < problem.num_factors(); ++i) {
+    if (!problem.linearize(i, lin) || lin.eta.size() == 0) continue;
+    const Eigen::LLT<Eigen::MatrixXd> llt(lin.C);
+    if (llt.info() != Eigen::Success)
+      throw std::runtime_error("smoother: factor " + std::to_string(i) +
+                               " has a covariance that is not positive definite");
+    const Eigen::VectorXd r = llt.matrixL().solve(lin.eta);  // whitened
+    const Eigen::MatrixXd J = llt.matrixL().solve(lin.J);
+    const double s = r.squaredNorm();
+    const auto [rho, w] = lin.robust ? robust(o.loss, o.loss_scale, s) : std::pair<double, double>{s, 1.0};
+    if (lin.robust && w < 1.0) ++out.down_weighted;
+    out.cost += 0.5 * rho;
+    out.by_kind[static_cast<int>(lin.kind)] += 0.5 * rho;
+    const Eigen::MatrixXd H = w * J.transpose() * J;
+    const Eigen::VectorXd g = w * J.transpose() * r;
+    for (std::size_t a = 0; a < lin.idx.size(); ++a) {
+      out.g[lin.idx[a]] += g[static_cast<Eigen::Index>(a)];
+      for (std::size_t b = 0; b < lin.idx.size(); ++b)
+        if (lin.idx[b] <= lin.idx[a])  // lower triangle
+          out.triplets.emplace_back(lin.idx[a], lin.idx[b],
+                                    H(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)));
+    }
+  }
+  return out;
+}
+
+SpMat assemble(const Normal& normal, int n, double damping) {
+  SpMat H(n, n);
+  H.setFromTriplets(normal.triplets.begin(), normal.triplets.end());
+  // A tiny Levenberg term keeps H definite along directions no factor
+  // constrains yet (it changes nothing measurable elsewhere).
+  for (int i = 0; i < n; ++i) H.coeffRef(i, i) += damping;
+  H.makeCompressed();
+  return H;
+}
+
+}  // namespace
+
+Smoother::Smoother(SmootherOptions options, Logger* log)
+    : o_(options), log_(log != nullptr ? log : &null_logger()), ekf_(options.initial_capacity, false) {
+  if (o_.period < 0 || o_.loop_gap < 1 || o_.max_iterations < 1 || !(o_.loss_scale > 0.0) || o_.growth < 0.0 ||
+      o_.loop_spacing < 0)
+    throw std::invalid_argument(
+        "smoother: period ≥ 0, growth ≥ 0, loop_gap ≥ 1, loop_spacing ≥ 0, max_iterations ≥ 1 and loss_scale > 0 "
+        "required");
+}
+
+void Smoother::reset(const Eigen::MatrixXd& P_rr) {
+  ekf_.reset(P_rr);
+  k_ = static_cast<int>(P_rr.rows());
+  key_ = 0;
+  last_optimised_ = 0;
+  last_seen_.assign(static_cast<std::size_t>(k_), 0);
+  loop_ = false;
+}
+
+void Smoother::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) { ekf_.predict(J_rr, Q); }
+
+Eigen::VectorXd Smoother::update(const std::vector<LinearizedObservation>& obs) {
+  std::vector<int> robot(static_cast<std::size_t>(k_));
+  for (int i = 0; i < k_; ++i) robot[static_cast<std::size_t>(i)] = i;
+  const Eigen::MatrixXd C_rr = ekf_.marginal(robot);
+  Eigen::VectorXd dx = ekf_.update(obs);
+  // Loop trigger: a feature row no update touched for loop_gap pose nodes,
+  // re-observed with a large robot correction.
+  bool stale = false;
+  for (const LinearizedObservation& o : obs)
+    for (int i : o.idx) {
+      if (i < k_) continue;
+      auto& seen = last_seen_[static_cast<std::size_t>(i)];
+      if (key_ - seen >= o_.loop_gap) stale = true;
+      seen = key_;
+    }
+  if (stale) {
+    const Eigen::VectorXd dr = dx.head(k_);
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(C_rr);
+    if (ldlt.info() == Eigen::Success && dr.dot(ldlt.solve(dr)) >= o_.loop_correction * o_.loop_correction)
+      loop_ = true;
+  }
+  return dx;
+}
+
+int Smoother::augment(const StateAugmentation& aug) {
+  const int first = ekf_.augment(aug);
+  last_seen_.resize(static_cast<std::size_t>(ekf_.dim()), key_);
+  return first;
+}
+
+void Smoother::remove(std::vector<int> idx) {
+  ekf_.remove(idx);
+  std::sort(idx.begin(), idx.end());
+  std::vector<std::int64_t> kept;
+  for (std::size_t i = 0; i < last_seen_.size(); ++i)
+    if (!std::binary_search(idx.begin(), idx.end(), static_cast<int>(i))) kept.push_back(last_seen_[i]);
+  last_seen_ = std::move(kept);
+}
+
+bool Smoother::relinearize(NonlinearProblem& problem, bool end_of_data) {
+  if (end_of_data) {
+    if (key_ == last_optimised_ || problem.num_pose_nodes() == 0) return false;
+    optimise(problem);
+    return true;
+  }
+  ++key_;
+  const std::int64_t since = key_ - last_optimised_;
+  const double due = std::max(static_cast<double>(o_.period), o_.growth * problem.num_pose_nodes());
+  const bool periodic = o_.period > 0 && static_cast<double>(since) >= due;
+  const bool loop = loop_ && since >= o_.loop_spacing;
+  if (!(periodic || loop || forced_)) return false;
+  if (loop && !periodic) ++loop_triggers_;
+  optimise(problem);
+  return true;
+}
+
+void Smoother::optimise(NonlinearProblem& problem) {
+  const auto t0 = std::chrono::steady_clock::now();
+  loop_ = false;
+  forced_ = false;
+  last_optimised_ = key_;
+  ++optimisations_;
+  const int n = problem.tangent_dim();
+  const int state = problem.state_dim();
+  if (state != ekf_.dim())
+    throw std::logic_error("smoother: the problem has " + std::to_string(state) + " state rows, the filter " +
+                           std::to_string(ekf_.dim()));
+  constexpr double kDamping = 1e-9;
+
+  report_ = {};
+  report_.factors = problem.num_factors();
+  report_.variables = n;
+  Normal normal = build(problem, o_);
+  report_.initial_cost = normal.cost;
+  log_->debug("optimisation ", optimisations_ + 0, ": cost before by kind: prior ", normal.by_kind[0], ", motion ",
+              normal.by_kind[1], ", observation ", normal.by_kind[2], ", linear ", normal.by_kind[3]);
+  SpMat H = assemble(normal, n, kDamping);
+  Eigen::SimplicialLDLT<SpMat, Eigen::Lower> ldlt;
+  ldlt.analyzePattern(H);
+  for (int it = 0; it < o_.max_iterations; ++it) {
+    ldlt.factorize(H);
+    if (ldlt.info() != Eigen::Success)
+      throw std::runtime_error("smoother: the information matrix is not positive definite");
+    Eigen::VectorXd delta = -ldlt.solve(normal.g);
+    const double cost = normal.cost;
+    problem.retract(delta);
+    ++report_.iterations;
+    Normal next = build(problem, o_);
+    // Step halving: Gauss–Newton overshoots far from the optimum; the
+    // retraction is not exactly invertible, so halve by moving back.
+    for (int halving = 0; halving < 4 && next.cost > cost * (1.0 + 1e-9); ++halving) {
+      delta *= 0.5;
+      problem.retract(-delta);
+      next = build(problem, o_);
+    }
+    normal = std::move(next);
+    H = assemble(normal, n, kDamping);
+    if (delta.lpNorm<Eigen::Infinity>() < o_.tolerance || cost - normal.cost < o_.cost_tolerance * cost) break;
+  }
+  report_.final_cost = normal.cost;
+  report_.down_weighted = normal.down_weighted;
+
+  // The running covariance: the marginal (H⁻¹)[S, S] of the state rows S =
+  // [0, state) with the earlier pose nodes P marginalised, as the inverse of
+  // the Schur complement H_SS − H_PSᵀ H_PP⁻¹ H_PS. H_PP is block tridiagonal
+  // (each factor touches at most one earlier node, a motion factor two
+  // consecutive ones), so its sparse LDLᵀ has no fill: O(N k²) per column.
+  const auto t1 = std::chrono::steady_clock::now();
+  const int np = n - state;
+  Eigen::MatrixXd C = Eigen::MatrixXd(H.topLeftCorner(state, state)).selfadjointView<Eigen::Lower>();
+  if (np > 0) {
+    const SpMat H_PP = H.bottomRightCorner(np, np);
+    const SpMat H_PS = H.bottomLeftCorner(np, state);
+    Eigen::SimplicialLDLT<SpMat, Eigen::Lower> pp(H_PP);
+    if (pp.info() != Eigen::Success) throw std::runtime_error("smoother: H_PP is not positive definite");
+    constexpr int kBlock = 64;
+    for (int c0 = 0; c0 < state; c0 += kBlock) {
+      const int cols = std::min(kBlock, state - c0);
+      const Eigen::MatrixXd X = pp.solve(Eigen::MatrixXd(H_PS.middleCols(c0, cols)));
+      C.middleCols(c0, cols).noalias() -= H_PS.transpose() * X;
+    }
+  }
+  const Eigen::LLT<Eigen::MatrixXd> schur(C);
+  if (schur.info() != Eigen::Success)
+    throw std::runtime_error("smoother: the Schur complement is not positive definite");
+  C = schur.solve(Eigen::MatrixXd::Identity(state, state));
+  ekf_.assign(0.5 * (C + C.transpose()));
+  const auto t2 = std::chrono::steady_clock::now();
+  report_.seconds = std::chrono::duration<double>(t2 - t0).count();
+  report_.seconds_marginal = std::chrono::duration<double>(t2 - t1).count();
+  log_->debug("optimisation ", optimisations_, ": ", report_.iterations, " iterations, cost ", report_.initial_cost,
+              " -> ", report_.final_cost, ", ", report_.factors, " factors, ", n, " variables, ",
+              report_.down_weighted, " down-weighted, ", report_.seconds, " s (marginal ", report_.seconds_marginal,
+              " s)");
+}
+
+}  // namespace mspace::smoother
