@@ -31,10 +31,15 @@ std::pair<Eigen::Vector2d, double> fit_line(const std::vector<Eigen::Vector2d>& 
   Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
   for (const auto& p : pts) scatter += (p - mean) * (p - mean).transpose();
   scatter /= static_cast<double>(pts.size());
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(scatter);
-  // Smallest eigenvalue first: its eigenvector is the normal, its value the
-  // mean squared distance from the line.
-  return {eig.eigenvectors().col(0), std::sqrt(std::max(0.0, eig.eigenvalues()[0]))};
+  // Closed form of the 2 × 2 eigenproblem: the smallest eigenvalue is
+  // (a + c)/2 − √(((a − c)/2)² + b²) (the mean squared distance from the
+  // line); the line's direction is at φ = ½ atan2(2b, a − c), the normal
+  // perpendicular to it.
+  const double a = scatter(0, 0), b = scatter(0, 1), c = scatter(1, 1);
+  const double half_diff = 0.5 * (a - c);
+  const double smallest = 0.5 * (a + c) - std::sqrt(half_diff * half_diff + b * b);
+  const double phi = 0.5 * std::atan2(2.0 * b, a - c);
+  return {Eigen::Vector2d(-std::sin(phi), std::cos(phi)), std::sqrt(std::max(0.0, smallest))};
 }
 
 double median_of(std::vector<double> v) {
@@ -466,7 +471,10 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
   return out;
 }
 
-MatchResult ReferenceScan::match(const ScanPoints& current, const Eigen::Vector3d& seed) const {
+MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vector3d& seed) const {
+  // Neighbouring beams of a dense scan (0.25°) on one wall add little: at most
+  // max_points evenly spread beams are matched.
+  const ScanPoints current = subsample(all_current, options_.max_points);
   MatchResult result;
   result.noise = noise_;
   result.increment = seed;

@@ -76,6 +76,7 @@ struct MatchOptions {
   double heading_search_step = 0.01;  ///< rad
   double search_radius = 0.3;         ///< m: overlap radius of the heading search (or the beam gap, if larger)
   int max_iterations = 30;
+  int max_points = 400;             ///< current points matched, evenly subsampled (0: all)
   double max_correspondence = 0.5;  ///< m, first iteration
   double min_correspondence = 0.1;  ///< m, reached at the last iterations (at least 4 σ_n)
   int normal_neighbours = 3;        ///< beams on each side used for a reference point's normal
