@@ -11,8 +11,8 @@
 #include <Eigen/Core>
 
 // The major version changes with every change of the plugin interfaces'
-// layout (2: DataSource::recorded_mounts).
-#define MSPACE_SDK_VERSION_MAJOR 2
+// layout (2: DataSource::recorded_mounts; 3: DataStep::odometry_covariance).
+#define MSPACE_SDK_VERSION_MAJOR 3
 #define MSPACE_SDK_VERSION_MINOR 0
 
 #define MSPACE_ABI_STR2(x) #x
