@@ -168,8 +168,10 @@ std::vector<tl::Laser> lasers() {
   l.max_range = 80.0;
   out.push_back(l);
   l = {};
-  l.name = "181x1deg_interleaved_12pc_noreturn_mount";  // the log
+  l.name = "181x1deg_interleaved_12pc_noreturn_clutter_mount";  // the log
   l.beams = 181;
+  l.clutter = 0.05;
+  l.quantum = 0.01;
   l.interleave = 0.25 * kDeg;
   l.interleave_phases = 4;
   l.max_range = 80.0;
