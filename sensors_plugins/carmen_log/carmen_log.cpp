@@ -47,7 +47,8 @@ Pose2 apply_increment(const Pose2& a, const Eigen::Vector3d& d) {
 void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   scan_matching::MatchOptions options;
   options.max_correspondence = params.get_double("scan_match_max_correspondence");
-  const double max_range = std::min(params.get_double("scan_match_max_range"), log_.laser.no_return);
+  const double limit = params.get_double("scan_match_max_range");
+  const double max_range = limit > 0.0 ? std::min(limit, log_.laser.no_return) : log_.laser.no_return;
   const scan_matching::LaserOdometry odometry(mount_, options);
   std::vector<double> residuals;
   std::size_t kept_seed = 0, correlative = 0;
@@ -117,8 +118,8 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                    "between consecutive scans, seeded with the wheel odometry, which is kept where a match fails; "
                    "each matched increment carries its covariance in DataStep::odometry_covariance)",
                    {"wheel", "scan_matched"}),
-      param_double("scan_match_max_range", 30.0, "beams at or beyond this range (m) are not used by the scan matcher",
-                   1.0),
+      param_double("scan_match_max_range", 0.0,
+                   "beams at or beyond this range (m) are not used by the scan matcher (0: every return)", 0.0),
       param_double("scan_match_max_correspondence", 0.5,
                    "largest distance (m) between paired points in the first ICP iteration (it shrinks to 0.1 m): "
                    "at least the wheel odometry's error between two scans",

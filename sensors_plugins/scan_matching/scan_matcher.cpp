@@ -167,7 +167,6 @@ ReferenceScan::ReferenceScan(const ScanPoints& points, const MatchOptions& optio
     points_.push_back(p);
     normals_.push_back(f.normal);
     bearings_.push_back(bearing[static_cast<std::size_t>(f.index)]);
-    gaps_.push_back(beam_gap(p.norm()));
   }
   if (n > 0) {
     min_bearing_ = *std::min_element(bearing.begin(), bearing.end());
@@ -215,9 +214,9 @@ int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q) const {
 Eigen::Vector3d ReferenceScan::heading_search(const ScanPoints& current, const Eigen::Vector3d& seed) const {
   Eigen::Vector3d best = seed;
   if (options_.heading_search <= 0.0 || points_.empty()) return best;
-  // Overlap score Σ (1 − (r/R)²) over current points whose point-to-line
-  // distance r to their partner is below R = search_radius (points further
-  // along the line than the beam gap do not count). At most 180 points are
+  // Overlap score Σ (1 − (d/R)²) over current points whose distance d to
+  // their partner is below R = max(search_radius, ρ_p · δ) (one beam spacing
+  // where beams are sparser than search_radius). At most 180 points are
   // scored: a heading needs the scene's shape, not every beam.
   const ScanPoints scored = subsample(current, 180);
   const double R = options_.search_radius;

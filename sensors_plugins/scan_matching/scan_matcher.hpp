@@ -23,13 +23,16 @@
 //     nearest of the ±association_window reference points around that
 //     bearing. The pair is kept when its point-to-line residual
 //     r = nᵀ (q' − p) is within the correspondence distance d (shrinking from
-//     max_correspondence to max(min_correspondence, 4 σ_n)) and its distance
-//     along the line is within d + the beam gap at p's range (the line at p is
-//     only known over about one beam gap). No absolute distance between beams
-//     enters, so 80 m beams 1° apart (1.4 m) pair as well as 1 m beams.
+//     max_correspondence to max(min_correspondence, 4 σ_n)) and q' is within
+//     max(d, gate_beams · ρ_p · δ) of p: where the beams are sparser than d
+//     (far away) the nearest beam on the same wall may be half a beam spacing
+//     along it, so 80 m beams 1° apart (1.4 m) still pair while near beams
+//     keep the tight point distance that also constrains sliding along walls.
 //  3. Heading search: wheel odometry's heading error (several degrees) moves
 //     far points beyond any pairing distance, so headings within
-//     ±heading_search of the seed are scored by overlap first.
+//     ±heading_search of the seed are scored by overlap first (Σ 1 − (d/R)²
+//     over current points within R = max(search_radius, ρ_p · δ) of their
+//     partner, at most 180 points).
 //  4. Gauss–Newton on the Huber-weighted Σ r²/σ² plus a weak prior on the seed
 //     (a direction the scans do not constrain, along a corridor, stays where
 //     the seed put it).
@@ -167,7 +170,6 @@ class ReferenceScan {
   std::vector<Eigen::Vector2d> points_;   ///< usable points, sorted by bearing
   std::vector<Eigen::Vector2d> normals_;  ///< unit normal of each
   std::vector<double> bearings_;          ///< bearing of each (ascending)
-  std::vector<double> gaps_;              ///< allowed distance along the line at each point
   ScanPoints all_points_;                 ///< every reference point, in beam order (for the correlative grid)
   double noise_ = 0.0;
   double spacing_ = 0.0;

@@ -235,6 +235,7 @@ double quantile(std::vector<double> v, double q) {
 struct SweepFigures {
   int increments = 0, matched = 0, correlative = 0;
   std::vector<double> wheel_xy, wheel_th, laser_xy, laser_th;
+  std::vector<double> nees;  ///< eᵀ C⁻¹ e of the matched increments (3 dof: 3 if C is right)
 };
 
 /// At most `limit` increments per motion, evenly spread over the route (turns
@@ -261,6 +262,11 @@ SweepFigures sweep(const tl::Laser& laser, const tl::World& world, int limit, un
       f.wheel_th.push_back(std::abs(wheel[2] - truth[2]));
       f.laser_xy.push_back((r.increment - truth).head<2>().norm());
       f.laser_th.push_back(std::abs(std::remainder(r.increment[2] - truth[2], 2 * std::numbers::pi)));
+      if (r.match.ok) {
+        Eigen::Vector3d e = r.increment - truth;
+        e[2] = std::remainder(e[2], 2 * std::numbers::pi);
+        f.nees.push_back(e.dot(r.covariance.ldlt().solve(e)));
+      }
     }
   }
   return f;
@@ -277,11 +283,11 @@ TEST_P(LaserSweep, MatchesAlmostAllIncrementsAndHalvesTheWheelError) {
     const SweepFigures f = sweep(laser, world, 80, 17u + static_cast<unsigned>(GetParam()));
     const double matched = 100.0 * f.matched / f.increments;
     std::printf("%-42s %-9s %4d incr: matched %5.1f %% (correlative %3d) | xy median %.4f vs wheel %.4f m, "
-                "p95 %.4f vs %.4f | θ median %.3f vs %.3f deg, p95 %.3f vs %.3f\n",
+                "p95 %.4f vs %.4f | θ median %.3f vs %.3f deg, p95 %.3f vs %.3f | NEES median %.2f\n",
                 laser.name.c_str(), world.name.c_str(), f.increments, matched, f.correlative,
                 quantile(f.laser_xy, 0.5), quantile(f.wheel_xy, 0.5), quantile(f.laser_xy, 0.95),
                 quantile(f.wheel_xy, 0.95), quantile(f.laser_th, 0.5) / kDeg, quantile(f.wheel_th, 0.5) / kDeg,
-                quantile(f.laser_th, 0.95) / kDeg, quantile(f.wheel_th, 0.95) / kDeg);
+                quantile(f.laser_th, 0.95) / kDeg, quantile(f.wheel_th, 0.95) / kDeg, quantile(f.nees, 0.5));
     EXPECT_GE(matched, 98.0) << world.name;
     EXPECT_LE(quantile(f.laser_xy, 0.5), 0.5 * quantile(f.wheel_xy, 0.5)) << world.name;
     EXPECT_LE(quantile(f.laser_th, 0.5), 0.5 * quantile(f.wheel_th, 0.5)) << world.name;
