@@ -24,7 +24,10 @@ struct Increment {
   Eigen::Vector3d seed;
 };
 
-std::vector<Increment> increments(const tl::World& world, int beams, double resolution_deg, double start_deg) {
+/// `far`: the seed is off by (−0.5 m, −0.45 m, −25°) besides the wheel noise,
+/// beyond the local match, so every increment needs the correlative search.
+std::vector<Increment> increments(const tl::World& world, int beams, double resolution_deg, double start_deg,
+                                  bool far = false) {
   tl::Laser laser;
   laser.beams = beams;
   laser.resolution = resolution_deg * tl::kDeg;
@@ -45,7 +48,9 @@ std::vector<Increment> increments(const tl::World& world, int beams, double reso
     const double d = truth.head<2>().norm();
     const Eigen::Vector3d noise((0.05 * d + 0.01) * n(rng), (0.05 * d + 0.01) * n(rng),
                                 (0.05 * std::abs(truth[2]) + tl::kDeg * d + 0.5 * tl::kDeg) * n(rng));
-    out.push_back({points(poses[i], static_cast<int>(i)), points(poses[i + 1], static_cast<int>(i + 1)), truth + noise});
+    const Eigen::Vector3d offset = far ? Eigen::Vector3d(-0.5, -0.45, -25 * tl::kDeg) : Eigen::Vector3d::Zero();
+    out.push_back({points(poses[i], static_cast<int>(i)), points(poses[i + 1], static_cast<int>(i + 1)),
+                   truth + noise + offset});
   }
   return out;
 }
@@ -77,6 +82,13 @@ void BM_Match1080Hall(benchmark::State& state) {
   run(state, data);
 }
 BENCHMARK(BM_Match1080Hall)->Unit(benchmark::kMicrosecond);
+
+// The correlative fallback's cost: seeds 0.67 m / 25° off.
+void BM_Match1080OfficeFarSeed(benchmark::State& state) {
+  static const std::vector<Increment> data = increments(tl::office_floor(), 1080, 0.25, -135.0, true);
+  run(state, data);
+}
+BENCHMARK(BM_Match1080OfficeFarSeed)->Unit(benchmark::kMicrosecond);
 
 void BM_Match181Office(benchmark::State& state) {
   static const std::vector<Increment> data = increments(tl::office_floor(), 181, 1.0, -90.0);
