@@ -358,6 +358,17 @@ void resolve_laser(LogContents& log, const ReaderOptions& o, const std::filesyst
       facts.warnings.push_back(facts.offset_origin + ": the laser pose differs from the median offset " +
                                offset_text(*facts.offset) + " in " + std::to_string(off) + " of " +
                                std::to_string(ox.size()) + " scans");
+    if (param_offset && same_offset(*param_offset, *facts.offset)) {
+      // Logged poses carry a few significant digits only (1e-4 m at 100 m):
+      // the exact PARAM value is what a configuration will repeat.
+      facts.offset = param_offset;
+    } else {
+      // Rounded to 1 mm and 0.01° so that a configuration can state it exactly.
+      const double deg = 180.0 / std::numbers::pi;
+      facts.offset = Pose2(std::round((*facts.offset)[0] * 1000.0) / 1000.0,
+                           std::round((*facts.offset)[1] * 1000.0) / 1000.0,
+                           std::round((*facts.offset)[2] * deg * 100.0) / 100.0 / deg);
+    }
     if (param_offset && !same_offset(*param_offset, *facts.offset))
       facts.warnings.push_back(param_origin + ": the PARAM offset " + offset_text(*param_offset) +
                                " differs from the offset of the ROBOTLASER1 poses " + offset_text(*facts.offset) +

@@ -38,7 +38,9 @@
 //    walls); SICK error codes (values repeated exactly within 1 % below the
 //    no-return value) are no return too;
 //  * the laser's offset on the robot: the median of the ROBOTLASER1 laser pose
-//    expressed in its robot pose, else PARAM robot_frontlaser_offset /
+//    expressed in its robot pose (the PARAM value when that agrees within
+//    1 cm / 0.5°, else rounded to 1 mm / 0.01°: logged poses have few digits
+//    and a configuration must be able to repeat it), else PARAM robot_frontlaser_offset /
 //    robot_frontlaser_side_offset / robot_frontlaser_angular_offset; a
 //    configured `laser_offset` that differs is an error against the
 //    ROBOTLASER1 poses and a warning against a PARAM.

@@ -205,72 +205,8 @@ TEST(CarmenLog, IntelTableTimesAndOdometryMatchTheFile) {
 
 // ---- Issue 18: what the log says about its laser -----------------------------
 
-namespace laser_log {
-
+namespace laser_log = mspace::test_laser::robotlaser_log;
 namespace tl = mspace::test_laser;
-
-struct Options {
-  double no_return = 81.9;        ///< the log's no-return value
-  double error_code = 81.83;      ///< a SICK error code just below it (0: none)
-  double mount_x = 0.22;          ///< the laser ahead of the robot
-  bool param_lines = true;        ///< PARAM robot_front_laser_max / robot_frontlaser_offset
-  double param_offset = 0.22;     ///< the PARAM offset written
-  int scans = 120;
-};
-
-/// A ROBOTLASER1 log of the issue's laser (181 beams 1° apart, start angle
-/// cycling through four values 0.25° apart, 12 % no-return, 2 cm noise, ranges
-/// in cm) driving the office floor at 0.6 m/s / 60°/s, a scan every 0.6 s, with
-/// noisy wheel odometry as the robot pose and robot ⊕ mount as the laser pose.
-/// Returns the true robot poses.
-std::vector<Eigen::Vector3d> write(const std::filesystem::path& file, const Options& o) {
-  tl::Laser laser;
-  laser.beams = 181;
-  laser.interleave = 0.25 * tl::kDeg;
-  laser.interleave_phases = 4;
-  laser.max_range = 80.0;
-  laser.no_return = o.no_return;
-  laser.dropout = 0.12;
-  laser.sigma = 0.02;
-  laser.mount_x = o.mount_x;
-  const tl::World world = tl::office_floor();
-  std::vector<Eigen::Vector3d> truth = tl::drive(world, 0.6, 60 * tl::kDeg, 0.6);
-  truth.resize(std::min<std::size_t>(truth.size(), static_cast<std::size_t>(o.scans)));
-  std::mt19937_64 rng(4);
-  std::normal_distribution<double> n(0.0, 1.0);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  std::ofstream out(file);
-  out << "# simulated ROBOTLASER1 log\n";
-  if (o.param_lines)
-    out << "PARAM robot_front_laser_max " << o.no_return << " sim 0\nPARAM robot_frontlaser_offset " << o.param_offset
-        << " sim 0\n";
-  Eigen::Vector3d odo = truth[0];
-  char buf[64];
-  for (std::size_t k = 0; k < truth.size(); ++k) {
-    if (k > 0) {  // wheel odometry: the true increment with noise
-      const Eigen::Vector3d d = tl::relative(truth[k - 1], truth[k]);
-      const double dist = d.head<2>().norm();
-      const double sxy = 0.05 * dist + 0.01, sth = 0.05 * std::abs(d[2]) + tl::kDeg * dist + 0.5 * tl::kDeg;
-      const Eigen::Vector3d noisy = d + Eigen::Vector3d(sxy * n(rng), sxy * n(rng), sth * n(rng));
-      const double c = std::cos(odo[2]), s = std::sin(odo[2]);
-      odo = Eigen::Vector3d(odo[0] + c * noisy[0] - s * noisy[1], odo[1] + s * noisy[0] + c * noisy[1], odo[2] + noisy[2]);
-    }
-    const tl::SimScan scan = tl::simulate(world, laser, truth[k], static_cast<int>(k), rng);
-    out << "ROBOTLASER1 0 " << scan.bearings[0] << " " << 180 * tl::kDeg << " " << tl::kDeg << " " << o.no_return
-        << " 0.01 0 " << scan.ranges.size();
-    for (double r : scan.ranges) {
-      const double logged = (o.error_code > 0.0 && r < o.no_return && u(rng) < 0.003) ? o.error_code : r;
-      std::snprintf(buf, sizeof buf, " %.2f", logged);
-      out << buf;
-    }
-    const double c = std::cos(odo[2]), s = std::sin(odo[2]);
-    out << " 0 " << odo[0] + c * o.mount_x << " " << odo[1] + s * o.mount_x << " " << odo[2] << " " << odo[0] << " "
-        << odo[1] << " " << odo[2] << " 0 0 0 0 0 " << 100.0 + 0.6 * static_cast<double>(k) << " sim 0\n";
-  }
-  return truth;
-}
-
-}  // namespace laser_log
 
 // The issue's log, with only the file changed in the configuration: the
 // no-return value, the error codes and the laser offset come from the log,
