@@ -229,7 +229,9 @@ bool same_measurements(const std::vector<Measurement>& a, const std::vector<Meas
 }
 
 bool same_steps(const DataStep& a, const DataStep& b) {
-  if (a.t != b.t || a.odometry != b.odometry || a.readings.size() != b.readings.size()) return false;
+  if (a.t != b.t || a.odometry != b.odometry || a.odometry_covariance != b.odometry_covariance ||
+      a.readings.size() != b.readings.size())
+    return false;
   for (std::size_t i = 0; i < a.readings.size(); ++i) {
     const SensorReading& x = a.readings[i];
     const SensorReading& y = b.readings[i];
@@ -313,12 +315,18 @@ void check_source(const PluginDescriptor& descriptor, PluginObject& object, cons
     bool ok = std::isfinite(a.t) && a.t >= last_t && a.odometry.allFinite();
     for (const SensorReading& reading : a.readings) ok = ok && reading.values.allFinite() && std::isfinite(reading.t);
     if (a.ground_truth) ok = ok && a.ground_truth->allFinite();
+    if (a.odometry_covariance.size() > 0)  // d × d for the d-vector x_d, finite and symmetric
+      ok = ok && a.odometry_covariance.rows() == a.odometry.size() && a.odometry_covariance.cols() == a.odometry.size() &&
+           a.odometry_covariance.allFinite() &&
+           (a.odometry_covariance - a.odometry_covariance.transpose()).cwiseAbs().maxCoeff() <=
+               1e-9 * (1.0 + a.odometry_covariance.cwiseAbs().maxCoeff());
     bad += ok ? 0 : 1;
     different += same_steps(a, b) ? 0 : 1;
     last_t = a.t;
   }
   r.at_most("source.steps_well_formed", steps == 0 ? 1 : bad, 0,
-            "no steps, or non-finite / decreasing times, odometry or readings");
+            "no steps, or non-finite / decreasing times, odometry or readings, or an odometry covariance "
+            "that is not a finite symmetric d × d matrix");
   r.at_most("source.deterministic", different, 0, "two instances with the same parameters gave different steps");
 }
 

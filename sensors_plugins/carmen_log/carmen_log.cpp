@@ -20,6 +20,11 @@ ReaderOptions options_from(const Params& params) {
   const std::string& variant = params.get_string("variant");
   o.variant = variant == "clf" ? Variant::Clf : variant == "gmapping" ? Variant::GMapping : Variant::Auto;
   o.no_return_range = params.get_double("no_return_range");
+  const std::vector<double>& offset = params.get_list("laser_offset");
+  if (offset.size() == 3) o.laser_offset = Eigen::Vector3d(offset[0], offset[1], offset[2] * std::numbers::pi / 180.0);
+  else if (!offset.empty())
+    throw std::invalid_argument("laser_offset must be empty (from the log) or [x, y, theta_deg], got " +
+                                std::to_string(offset.size()) + " values");
   o.flaser_fov = params.get_double("flaser_fov_deg") * std::numbers::pi / 180.0;
   o.time_offset = params.get_double("time_offset");
   o.skip_malformed = params.get_string("on_malformed") == "skip";
@@ -35,31 +40,37 @@ Pose2 apply_increment(const Pose2& a, const Eigen::Vector3d& d) {
 }  // namespace
 
 /// Replaces every scan's odometry pose by laser odometry: the increment from
-/// the previous scan is the point-to-line ICP match of the two scans, seeded
-/// with the wheel-odometry increment (which is kept where the match fails).
+/// the previous scan is the scan match of the two scans for the laser at
+/// mount_ on the robot (LaserOdometry: robot motion x_rs ⊕ d_laser ⊖ x_rs),
+/// seeded with the wheel-odometry increment, which is kept where the match
+/// fails. Matched increments keep the match's covariance for DataStep.
 void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   scan_matching::MatchOptions options;
   options.max_correspondence = params.get_double("scan_match_max_correspondence");
-  const double max_range = params.get_double("scan_match_max_range");
+  const double limit = params.get_double("scan_match_max_range");
+  const double max_range = limit > 0.0 ? std::min(limit, log_.laser.no_return) : log_.laser.no_return;
+  const scan_matching::LaserOdometry odometry(mount_, options);
   std::vector<double> residuals;
-  std::size_t kept_seed = 0;
+  std::size_t kept_seed = 0, correlative = 0;
   std::vector<Pose2> matched(log_.scans.size());
+  covariances_.assign(log_.scans.size(), Eigen::Matrix3d::Zero());
   matched[0] = log_.scans[0].odometry;
   auto points_of = [&](const Scan& s) { return scan_matching::scan_to_points(s.ranges, s.bearings, max_range); };
   for (std::size_t i = 1; i < log_.scans.size(); ++i) {
     const Scan& previous = log_.scans[i - 1];
     const Scan& current = log_.scans[i];
     const Eigen::Vector3d seed = odometry_increment(previous.odometry, current.odometry);
-    const scan_matching::ReferenceScan reference(points_of(previous), options);
-    const scan_matching::MatchResult m = reference.match(points_of(current), seed);
-    if (m.ok) {
-      residuals.push_back(m.rms);
+    const scan_matching::OdometryResult r = odometry.match(points_of(previous), points_of(current), seed);
+    if (r.match.ok) {
+      residuals.push_back(r.match.rms);
+      covariances_[i] = r.covariance;
+      correlative += r.match.correlative ? 1 : 0;
     } else {
       ++kept_seed;
-      log.debug("scan ", i, " (", file_, ":", current.line, "): scan match failed (", m.pairs,
-                " pairs, rms ", m.rms, " m); wheel odometry kept");
+      log.debug("scan ", i, " (", file_, ":", current.line, "): scan match failed (", r.match.pairs, " pairs of ",
+                r.match.overlap, " overlapping points, rms ", r.match.rms, " m); wheel odometry kept");
     }
-    matched[i] = apply_increment(matched[i - 1], m.ok ? m.increment : seed);
+    matched[i] = apply_increment(matched[i - 1], r.increment);
   }
   for (std::size_t i = 0; i < log_.scans.size(); ++i) log_.scans[i].odometry = matched[i];
   double median = 0.0;
@@ -68,8 +79,11 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
     median = residuals[residuals.size() / 2];
   }
   log.info("laser odometry: ", residuals.size(), " of ", log_.scans.size() - 1,
-           " increments scan-matched (median residual ", median * 1000.0, " mm), ", kept_seed,
-           " kept the wheel odometry");
+           " increments scan-matched (median residual ", median * 1000.0, " mm, ", correlative,
+           " after a correlative search), ", kept_seed, " kept the wheel odometry");
+  if (kept_seed * 20 > log_.scans.size())
+    log.warn("laser odometry: ", kept_seed, " of ", log_.scans.size() - 1,
+             " scan matches failed (more than 5 %): check no_return_range, laser_offset and scan_match_max_range");
 }
 
 std::vector<ParamSpec> CarmenLogSource::param_specs() {
@@ -84,7 +98,16 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                    "odometry from ODOM lines); auto = gmapping when the log has NEFF lines",
                    {"auto", "clf", "gmapping"}),
       param_string("channel", "laser", "channel of the laser readings"),
-      param_double("no_return_range", 81.0, "ranges at or beyond this (m) mean no return", 0.0),
+      param_double("no_return_range", 0.0,
+                   "ranges at or beyond this (m) mean no return; 0: from the log (the value many ranges have "
+                   "exactly with nothing above, else PARAM robot_front_laser_max, else the ROBOTLASER1 maximum "
+                   "range). A value the data contradicts is a warning, or an error when >= 5 % of the ranges sit "
+                   "exactly at one value below it",
+                   0.0),
+      param_list("laser_offset", {},
+                 "the laser's pose on the robot [x, y, theta_deg] for laser odometry; empty: from the log "
+                 "(ROBOTLASER1 laser vs robot pose, else PARAM robot_frontlaser_*offset), else zero. The log's "
+                 "offset is reported as the recorded mount of `channel`, so sensors.<name>.mount must agree"),
       param_double("flaser_fov_deg", 180.0, "field of view of FLASER scans (deg)", 1.0, 360.0),
       param_double("time_offset", 0.0, "added to every time stamp (s), e.g. 976052857.337 for intel.gfs.log"),
       param_string("on_malformed", "error",
@@ -92,10 +115,11 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                    {"error", "skip"}),
       param_string("odometry", "wheel",
                    "the odometry increments: the log's wheel odometry, or laser odometry (point-to-line ICP "
-                   "between consecutive scans, seeded with the wheel odometry, which is kept where a match fails)",
+                   "between consecutive scans, seeded with the wheel odometry, which is kept where a match fails; "
+                   "each matched increment carries its covariance in DataStep::odometry_covariance)",
                    {"wheel", "scan_matched"}),
-      param_double("scan_match_max_range", 30.0, "beams at or beyond this range (m) are not used by the scan matcher",
-                   1.0),
+      param_double("scan_match_max_range", 0.0,
+                   "beams at or beyond this range (m) are not used by the scan matcher (0: every return)", 0.0),
       param_double("scan_match_max_correspondence", 0.5,
                    "largest distance (m) between paired points in the first ICP iteration (it shrinks to 0.1 m): "
                    "at least the wheel odometry's error between two scans",
@@ -119,7 +143,19 @@ CarmenLogSource::CarmenLogSource(const PluginArgs& args)
     log.warn("skipped ", log_.skipped, " malformed line(s); the first: ", log_.first_problem);
   if (log_.format == Format::Carmen && log_.variant == Variant::GMapping)
     log.warn("GMapping-written log: odometry comes from its ODOM lines, which GMapping re-anchored (not raw odometry)");
-  log.info("read ", log_.scans.size(), " scans from ", args.params.get_string("file"));
+  log.info("read ", log_.scans.size(), " scans from ", args.params.get_string("file"), "; no return at ",
+           log_.laser.no_return, " m (", log_.laser.no_return_origin, ")");
+  for (const std::string& w : log_.laser.warnings) log.warn(w);
+  if (!log_.laser.error_codes.empty())
+    log.info(log_.laser.error_code_ranges, " ranges at ", log_.laser.error_codes.size(),
+             " error code value(s) just below the no-return value read as no return");
+  const ReaderOptions reader = options_from(args.params);
+  if (reader.laser_offset) {
+    mount_ = *reader.laser_offset;
+  } else if (log_.laser.offset) {
+    mount_ = *log_.laser.offset;
+    log.info("laser offset on the robot ", mount_.transpose(), " (", log_.laser.offset_origin, ")");
+  }
   if (args.params.get_string("odometry") == "scan_matched") scan_match_odometry(args.params, log);
 
   const Scan& first = log_.scans.front();
@@ -137,7 +173,10 @@ bool CarmenLogSource::next(DataStep& step) {
   const Scan& scan = log_.scans[next_];
   step = DataStep{};
   step.t = scan.t;
-  if (next_ > 0) step.odometry = odometry_increment(log_.scans[next_ - 1].odometry, scan.odometry);
+  if (next_ > 0) {
+    step.odometry = odometry_increment(log_.scans[next_ - 1].odometry, scan.odometry);
+    if (next_ < covariances_.size() && !covariances_[next_].isZero()) step.odometry_covariance = covariances_[next_];
+  }
   if (use_ground_truth_ && scan.ground_truth) step.ground_truth = to_pose6(*scan.ground_truth);
 
   SensorReading reading;
@@ -151,6 +190,16 @@ bool CarmenLogSource::next(DataStep& step) {
   step.readings.push_back(std::move(reading));
   ++next_;
   return true;
+}
+
+}  // namespace mspace::carmen_log
+
+namespace mspace::carmen_log {
+
+std::vector<RecordedMount> CarmenLogSource::recorded_mounts() const {
+  if (!log_.laser.offset) return {};
+  const Pose2& o = *log_.laser.offset;
+  return {RecordedMount{channel_, make_pose2d(o[0], o[1], o[2]), log_.laser.offset_origin}};
 }
 
 }  // namespace mspace::carmen_log

@@ -9,7 +9,9 @@
 //     increment of the `odometry2d` motion model (planar_odometry.hpp). The
 //     first step has none. With `odometry: scan_matched` the increments are
 //     laser odometry (scan_matching/scan_matcher.hpp), seeded with the wheel
-//     odometry;
+//     odometry, for the laser at `laser_offset` (or the log's offset) on the
+//     robot, and DataStep::odometry_covariance is the match's covariance
+//     (empty where the match failed and the wheel increment was kept);
 //   - one SensorReading on `channel` whose `values` has one row per beam, in
 //     beam order: (range, bearing) in m and rad in the laser frame, range 0
 //     for a beam with no return (the `laser_lines` extractor relies on the
@@ -44,6 +46,10 @@ class CarmenLogSource final : public DataSource {
   Pose6 initial_pose() const override { return initial_pose_; }
 
   const LogContents& contents() const { return log_; }
+  /// The laser's offset on the log's recorded channel (ROBOTLASER1 poses or PARAM lines), if any.
+  std::vector<RecordedMount> recorded_mounts() const override;
+  /// The laser pose on the robot used for laser odometry (x, y, θ).
+  const Eigen::Vector3d& laser_mount() const { return mount_; }
 
  private:
   void scan_match_odometry(const Params& params, Logger& log);
@@ -55,6 +61,8 @@ class CarmenLogSource final : public DataSource {
   Pose6 initial_pose_ = Pose6::Zero();
   std::size_t next_ = 0;
   Logger* log_out_ = nullptr;
+  Eigen::Vector3d mount_ = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Matrix3d> covariances_;  ///< per scan: the laser odometry increment's covariance (0: none)
 };
 
 }  // namespace mspace::carmen_log

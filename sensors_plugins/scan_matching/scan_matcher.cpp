@@ -4,11 +4,14 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <numeric>
 
 namespace mspace::scan_matching {
 namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
 Eigen::Matrix2d rotation(double a) {
   const double c = std::cos(a), s = std::sin(a);
@@ -16,6 +19,8 @@ Eigen::Matrix2d rotation(double a) {
   R << c, -s, s, c;
   return R;
 }
+
+double wrap(double a) { return std::remainder(a, kTwoPi); }
 
 /// Unit normal of the total-least-squares line through `pts` and the RMS
 /// distance of the points from it.
@@ -26,21 +31,53 @@ std::pair<Eigen::Vector2d, double> fit_line(const std::vector<Eigen::Vector2d>& 
   Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
   for (const auto& p : pts) scatter += (p - mean) * (p - mean).transpose();
   scatter /= static_cast<double>(pts.size());
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(scatter);
-  // Smallest eigenvalue first: its eigenvector is the normal, its value the
-  // mean squared distance from the line.
-  return {eig.eigenvectors().col(0), std::sqrt(std::max(0.0, eig.eigenvalues()[0]))};
+  // Closed form of the 2 × 2 eigenproblem: the smallest eigenvalue is
+  // (a + c)/2 − √(((a − c)/2)² + b²) (the mean squared distance from the
+  // line); the line's direction is at φ = ½ atan2(2b, a − c), the normal
+  // perpendicular to it.
+  const double a = scatter(0, 0), b = scatter(0, 1), c = scatter(1, 1);
+  const double half_diff = 0.5 * (a - c);
+  const double smallest = 0.5 * (a + c) - std::sqrt(half_diff * half_diff + b * b);
+  const double phi = 0.5 * std::atan2(2.0 * b, a - c);
+  return {Eigen::Vector2d(-std::sin(phi), std::cos(phi)), std::sqrt(std::max(0.0, smallest))};
+}
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const auto mid = v.begin() + static_cast<long>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
 }
 
 /// Correspondence distance at iteration `i`: from `max` down to `min` over the
 /// first half of the iterations, then `min`.
-double correspondence_distance(const MatchOptions& o, int i) {
-  const double half = std::max(1.0, 0.5 * o.max_iterations);
+double correspondence_distance(double max, double min, int max_iterations, int i) {
+  const double half = std::max(1.0, 0.5 * max_iterations);
   const double f = std::min(1.0, i / half);
-  return o.max_correspondence + f * (o.min_correspondence - o.max_correspondence);
+  return max + f * (min - max);
+}
+
+/// Every k-th point so that at most `limit` remain (k ≥ 1), beam order kept.
+ScanPoints subsample(const ScanPoints& points, int limit) {
+  if (limit <= 0 || static_cast<int>(points.size()) <= limit) return points;
+  const double stride = static_cast<double>(points.size()) / limit;
+  ScanPoints out;
+  out.reserve(static_cast<std::size_t>(limit));
+  for (int i = 0; i < limit; ++i) out.push_back(points[static_cast<std::size_t>(i * stride)]);
+  return out;
 }
 
 }  // namespace
+
+Eigen::Vector3d compose(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  const Eigen::Vector2d t = a.head<2>() + rotation(a[2]) * b.head<2>();
+  return {t.x(), t.y(), wrap(a[2] + b[2])};
+}
+
+Eigen::Vector3d inverse(const Eigen::Vector3d& a) {
+  const Eigen::Vector2d t = -(rotation(a[2]).transpose() * a.head<2>());
+  return {t.x(), t.y(), wrap(-a[2])};
+}
 
 ScanPoints scan_to_points(const std::vector<double>& ranges, const std::vector<double>& bearings,
                           double max_range) {
@@ -48,23 +85,48 @@ ScanPoints scan_to_points(const std::vector<double>& ranges, const std::vector<d
   points.reserve(ranges.size());
   for (std::size_t i = 0; i < ranges.size() && i < bearings.size(); ++i) {
     const double r = ranges[i];
-    if (!(r > 0.0) || r >= max_range) continue;
+    if (!(r > 0.0) || !(r < max_range) || !std::isfinite(bearings[i])) continue;
     points.emplace_back(r * std::cos(bearings[i]), r * std::sin(bearings[i]));
   }
   return points;
 }
 
-ReferenceScan::ReferenceScan(const ScanPoints& points, const MatchOptions& options) : options_(options) {
-  // A normal from up to `normal_neighbours` beams on each side, walking out
-  // while consecutive points are closer than normal_radius or, far away where
-  // the beams spread, than gap_per_m × range.
-  std::vector<Eigen::Vector2d> neighbourhood;
-  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> usable;
+// ---- Reference scan: normals, bearing index, noise --------------------------
+
+ReferenceScan::ReferenceScan(const ScanPoints& points, const MatchOptions& options)
+    : options_(options), all_points_(points) {
   const auto n = static_cast<int>(points.size());
+  // Beam spacing δ: the median angle between consecutive returns (no-return
+  // beams make some gaps multiples of δ; the median ignores them). It is
+  // measured, not configured, so 0.25°–1° lasers and varying start angles
+  // need no setting.
+  std::vector<double> steps, bearing(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
-    neighbourhood.assign(1, points[static_cast<std::size_t>(i)]);
     const auto& p = points[static_cast<std::size_t>(i)];
-    const double max_gap = std::max(options_.normal_radius, options_.gap_per_m * p.norm());
+    bearing[static_cast<std::size_t>(i)] = std::atan2(p.y(), p.x());
+    max_range_ = std::max(max_range_, p.norm());
+  }
+  for (int i = 1; i < n; ++i) {
+    const double d = std::abs(wrap(bearing[static_cast<std::size_t>(i)] - bearing[static_cast<std::size_t>(i - 1)]));
+    if (d > 1e-9) steps.push_back(d);
+  }
+  spacing_ = steps.empty() ? std::numbers::pi / 180.0 : median_of(steps);
+
+  // Normals: up to `normal_neighbours` beams on each side, walking out while
+  // consecutive points are closer than beam_gap(range) (a wall seen at a
+  // grazing angle or far away has sparse beams).
+  std::vector<Eigen::Vector2d> neighbourhood;
+  struct Fit {
+    int index;
+    Eigen::Vector2d normal;
+    double rms;
+  };
+  std::vector<Fit> fits;
+  std::vector<double> rms_all;
+  for (int i = 0; i < n; ++i) {
+    const auto& p = points[static_cast<std::size_t>(i)];
+    neighbourhood.assign(1, p);
+    const double max_gap = beam_gap(p.norm());
     for (int step : {-1, 1}) {
       const Eigen::Vector2d* last = &p;
       for (int j = i + step, taken = 0; j >= 0 && j < n && taken < options_.normal_neighbours; j += step, ++taken) {
@@ -76,111 +138,425 @@ ReferenceScan::ReferenceScan(const ScanPoints& points, const MatchOptions& optio
     }
     if (neighbourhood.size() < 3) continue;
     const auto [normal, rms] = fit_line(neighbourhood);
-    if (rms > options_.max_line_rms) continue;
-    usable.emplace_back(p, normal);
+    // The RMS of m points about their own fitted line underestimates σ by
+    // √((m − 2)/m) (two line parameters fitted).
+    const double m = static_cast<double>(neighbourhood.size());
+    const double sigma = rms * std::sqrt(m / (m - 2.0));
+    fits.push_back({i, normal, sigma});
+    rms_all.push_back(sigma);
   }
-  std::sort(usable.begin(), usable.end(), [](const auto& a, const auto& b) { return a.first.x() < b.first.x(); });
-  for (const auto& [p, normal] : usable) {
+  // σ_n: most neighbourhoods lie on walls, so the median fit RMS is the range
+  // noise (corners and clutter are the minority above it).
+  noise_ = median_of(rms_all);
+  const double line_limit = std::max(options_.max_line_rms, options_.line_rms_factor * noise_);
+  min_correspondence_ = std::max(options_.min_correspondence, 4.0 * noise_);
+  huber_ = std::max(options_.huber, 1.5 * noise_);
+  point_sigma_ = std::max(options_.point_sigma, noise_);
+  max_rms_ = std::max(options_.max_rms, 3.0 * noise_);
+
+  std::vector<int> order;
+  for (std::size_t k = 0; k < fits.size(); ++k)
+    if (fits[k].rms <= line_limit) order.push_back(static_cast<int>(k));
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    return bearing[static_cast<std::size_t>(fits[static_cast<std::size_t>(a)].index)] <
+           bearing[static_cast<std::size_t>(fits[static_cast<std::size_t>(b)].index)];
+  });
+  for (int k : order) {
+    const Fit& f = fits[static_cast<std::size_t>(k)];
+    const auto& p = points[static_cast<std::size_t>(f.index)];
     points_.push_back(p);
-    normals_.push_back(normal);
+    normals_.push_back(f.normal);
+    bearings_.push_back(bearing[static_cast<std::size_t>(f.index)]);
   }
+  if (n > 0) {
+    min_bearing_ = *std::min_element(bearing.begin(), bearing.end());
+    max_bearing_ = *std::max_element(bearing.begin(), bearing.end());
+  }
+  full_circle_ = max_bearing_ - min_bearing_ > kTwoPi - 3.0 * spacing_;
 }
 
-int ReferenceScan::nearest(const Eigen::Vector2d& q, double max_distance) const {
-  const auto first = std::lower_bound(points_.begin(), points_.end(), q.x() - max_distance,
-                                      [](const Eigen::Vector2d& p, double x) { return p.x() < x; });
+double ReferenceScan::beam_gap(double range) const {
+  return std::max(options_.normal_radius, options_.gap_beams * range * spacing_);
+}
+
+bool ReferenceScan::in_view(const Eigen::Vector2d& q) const {
+  if (q.squaredNorm() > max_range_ * max_range_) return false;
+  if (full_circle_) return true;
+  const double b = std::atan2(q.y(), q.x());
+  return b >= min_bearing_ - 0.5 * spacing_ && b <= max_bearing_ + 0.5 * spacing_;
+}
+
+int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q) const {
+  const int n = static_cast<int>(points_.size());
+  if (n == 0) return -1;
+  // Projective association: the reference beams around q's bearing are the
+  // ones that could have seen q; the nearest of them is its partner.
+  const double b = std::atan2(q.y(), q.x());
+  const int at = static_cast<int>(std::lower_bound(bearings_.begin(), bearings_.end(), b) - bearings_.begin());
+  const int w = std::max(1, options_.association_window);
   int best = -1;
-  double best_d2 = max_distance * max_distance;
-  for (auto it = first; it != points_.end() && it->x() <= q.x() + max_distance; ++it) {
-    const double d2 = (*it - q).squaredNorm();
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int k = at - w; k < at + w; ++k) {
+    int j = k;
+    if (full_circle_) j = ((k % n) + n) % n;
+    else if (k < 0 || k >= n) continue;
+    const double d2 = (points_[static_cast<std::size_t>(j)] - q).squaredNorm();
     if (d2 < best_d2) {
       best_d2 = d2;
-      best = static_cast<int>(it - points_.begin());
+      best = j;
     }
   }
   return best;
 }
 
-double ReferenceScan::overlap_score(const ScanPoints& current, const Eigen::Vector3d& T, double radius) const {
-  const Eigen::Matrix2d R = rotation(T[2]);
-  double score = 0.0;
-  for (const auto& q : current) {
-    const Eigen::Vector2d moved = R * q + T.head<2>();
-    const int j = nearest(moved, radius);
-    if (j < 0) continue;
-    const double d = (moved - points_[static_cast<std::size_t>(j)]).norm() / radius;
-    score += 1.0 - d * d;
-  }
-  return score;
-}
+// ---- Heading search ----------------------------------------------------------
 
 Eigen::Vector3d ReferenceScan::heading_search(const ScanPoints& current, const Eigen::Vector3d& seed) const {
   Eigen::Vector3d best = seed;
-  if (options_.heading_search <= 0.0) return best;
-  double best_score = overlap_score(current, seed, options_.search_radius);
+  if (options_.heading_search <= 0.0 || points_.empty()) return best;
+  // Overlap score Σ (1 − (d/R)²) over current points whose distance d to
+  // their partner is below R = max(search_radius, ρ_p · δ) (one beam spacing
+  // where beams are sparser than search_radius). At most 180 points are
+  // scored: a heading needs the scene's shape, not every beam.
+  const ScanPoints scored = subsample(current, 180);
+  const double R = options_.search_radius;
+  auto score = [&](const Eigen::Vector3d& T) {
+    const Eigen::Matrix2d Rot = rotation(T[2]);
+    double s = 0.0;
+    for (const auto& q : scored) {
+      const Eigen::Vector2d moved = Rot * q + T.head<2>();
+      const int j = nearest_by_bearing(moved);
+      if (j < 0) continue;
+      const Eigen::Vector2d& p = points_[static_cast<std::size_t>(j)];
+      const double d = (moved - p).norm();
+      const double radius = std::max(R, p.norm() * spacing_);
+      if (d >= radius) continue;
+      s += 1.0 - (d / radius) * (d / radius);
+    }
+    return s;
+  };
+  double best_score = score(seed);
   const int steps = static_cast<int>(std::ceil(options_.heading_search / options_.heading_search_step));
   for (int k = -steps; k <= steps; ++k) {
     if (k == 0) continue;
     Eigen::Vector3d T = seed;
     T[2] += k * options_.heading_search_step;
-    const double score = overlap_score(current, T, options_.search_radius);
-    if (score > best_score) {
-      best_score = score;
+    const double s = score(T);
+    if (s > best_score) {
+      best_score = s;
       best = T;
     }
   }
   return best;
 }
 
-MatchResult ReferenceScan::match(const ScanPoints& current, const Eigen::Vector3d& seed) const {
-  MatchResult result;
-  Eigen::Vector3d T = heading_search(current, seed);
+// ---- Correlative search (Olson 2009) ----------------------------------------
+
+Eigen::Vector3d ReferenceScan::correlative_search(const ScanPoints& current, const Eigen::Vector3d& seed) const {
+  const double res = std::max(options_.correlative_resolution, 2.0 * noise_);
+  const int k = std::max(1, options_.correlative_coarse);
+  const double cmax = options_.correlative_max_range;
+  const int window = static_cast<int>(std::ceil(options_.correlative_xy / res));  // fine offsets ± window
+  const int kernel = 2;                                                           // cells of the likelihood kernel
+
+  // Samples of the reference surface: the points, and points along the
+  // segment between consecutive beams on one surface (closer than the beam
+  // gap), so sparse far beams draw a continuous wall, not dots.
+  std::vector<Eigen::Vector2d> samples;
+  for (std::size_t i = 0; i < all_points_.size(); ++i) {
+    const auto& p = all_points_[i];
+    if (p.norm() > cmax) continue;
+    samples.push_back(p);
+    if (i + 1 < all_points_.size()) {
+      const auto& q = all_points_[i + 1];
+      const double d = (q - p).norm();
+      if (q.norm() <= cmax && d <= beam_gap(p.norm()) && d > res) {
+        const int m = static_cast<int>(std::ceil(d / (0.5 * res)));
+        for (int s = 1; s < m; ++s) samples.push_back(p + (q - p) * (static_cast<double>(s) / m));
+      }
+    }
+  }
+  if (samples.empty()) return seed;
+  Eigen::Vector2d lo = samples.front(), hi = samples.front();
+  for (const auto& s : samples) {
+    lo = lo.cwiseMin(s);
+    hi = hi.cwiseMax(s);
+  }
+  // Margin: the search window, a coarse block and the kernel, so that every
+  // scored cell index stays inside the grid.
+  const int margin = window + k + kernel + 1;
+  lo.array() -= margin * res;
+  hi.array() += margin * res;
+  const int nx = static_cast<int>(std::ceil((hi.x() - lo.x()) / res)) + 1;
+  const int ny = static_cast<int>(std::ceil((hi.y() - lo.y()) / res)) + 1;
+  // Likelihood grid: exp(−d²/2s²) of the distance to the nearest surface
+  // sample, s = one cell (the max over samples within the kernel).
+  std::vector<float> grid(static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny), 0.0f);
+  auto at = [nx](int ix, int iy) { return static_cast<std::size_t>(iy) * static_cast<std::size_t>(nx) + static_cast<std::size_t>(ix); };
+  for (const auto& s : samples) {
+    const double fx = (s.x() - lo.x()) / res, fy = (s.y() - lo.y()) / res;
+    const int cx = static_cast<int>(std::floor(fx)), cy = static_cast<int>(std::floor(fy));
+    for (int iy = cy - kernel; iy <= cy + kernel; ++iy)
+      for (int ix = cx - kernel; ix <= cx + kernel; ++ix) {
+        const double dx = ix + 0.5 - fx, dy = iy + 0.5 - fy;
+        const auto v = static_cast<float>(std::exp(-0.5 * (dx * dx + dy * dy)));
+        float& cell = grid[at(ix, iy)];
+        cell = std::max(cell, v);
+      }
+  }
+  // Max-pooled grid (Cartographer's precomputation grid): pooled(i, j) = max
+  // of grid over the k × k cells from (i, j). A block of fine offsets
+  // {o, …, o + k − 1}² then scores at most Σ pooled(cell + o): the coarse
+  // score bounds every fine score in its block, which makes the branch and
+  // bound below exact.
+  std::vector<float> rows(grid.size(), 0.0f), pooled(grid.size(), 0.0f);
+  for (int iy = 0; iy < ny; ++iy)
+    for (int ix = 0; ix < nx; ++ix) {
+      float m = 0.0f;
+      for (int d = 0; d < k && ix + d < nx; ++d) m = std::max(m, grid[at(ix + d, iy)]);
+      rows[at(ix, iy)] = m;
+    }
+  for (int iy = 0; iy < ny; ++iy)
+    for (int ix = 0; ix < nx; ++ix) {
+      float m = 0.0f;
+      for (int d = 0; d < k && iy + d < ny; ++d) m = std::max(m, rows[at(ix, iy + d)]);
+      pooled[at(ix, iy)] = m;
+    }
+
+  ScanPoints scored;
+  for (const auto& q : current)
+    if (q.norm() <= cmax) scored.push_back(q);
+  scored = subsample(scored, options_.correlative_max_points);
+  if (scored.empty()) return seed;
+  double far = 0.0;
+  for (const auto& q : scored) far = std::max(far, q.norm());
+  // Heading step: the farthest scored point moves by at most one cell.
+  const double dtheta = std::max(res / std::max(far, res), 1e-4);
+  const int nth = static_cast<int>(std::ceil(options_.correlative_theta / dtheta));
+  const int blocks = (2 * window + 1 + k - 1) / k;  // coarse blocks per axis
+
+  struct Candidate {
+    float score;
+    int th, bx, by;
+  };
+  std::vector<Candidate> candidates;
+  candidates.reserve(static_cast<std::size_t>(2 * nth + 1) * static_cast<std::size_t>(blocks * blocks));
+  std::vector<std::vector<std::size_t>> cells(static_cast<std::size_t>(2 * nth + 1));
+  for (int t = -nth; t <= nth; ++t) {
+    const Eigen::Matrix2d R = rotation(seed[2] + t * dtheta);
+    auto& c = cells[static_cast<std::size_t>(t + nth)];
+    c.reserve(scored.size());
+    for (const auto& q : scored) {
+      const Eigen::Vector2d m = R * q + seed.head<2>();
+      const int ix = static_cast<int>(std::floor((m.x() - lo.x()) / res)) - window;
+      const int iy = static_cast<int>(std::floor((m.y() - lo.y()) / res)) - window;
+      // Cells that leave the grid for some offset are off the reference surface for all.
+      if (ix < 0 || iy < 0 || ix + 2 * window + k >= nx || iy + 2 * window + k >= ny) continue;
+      c.push_back(at(ix, iy));
+    }
+    for (int by = 0; by < blocks; ++by)
+      for (int bx = 0; bx < blocks; ++bx) {
+        const std::size_t off = at(bx * k, by * k);
+        float s = 0.0f;
+        for (std::size_t cell : c) s += pooled[cell + off];
+        candidates.push_back({s, t, bx, by});
+      }
+  }
+  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) { return a.score > b.score; });
+
+  // Branch and bound: refine blocks in order of their bound until the bound
+  // falls below the best fine score. A small prior on the distance from the
+  // seed breaks ties (a corridor's flat direction) towards the seed.
+  const double n_points = static_cast<double>(scored.size());
+  double best = -std::numeric_limits<double>::infinity();
+  Eigen::Vector3d best_pose = seed;
+  for (const Candidate& cand : candidates) {
+    if (cand.score <= best) break;
+    const auto& c = cells[static_cast<std::size_t>(cand.th + nth)];
+    for (int oy = cand.by * k; oy < cand.by * k + k && oy <= 2 * window; ++oy)
+      for (int ox = cand.bx * k; ox < cand.bx * k + k && ox <= 2 * window; ++ox) {
+        const std::size_t off = at(ox, oy);
+        float s = 0.0f;
+        for (std::size_t cell : c) s += grid[cell + off];
+        const double dx = (ox - window) * res, dy = (oy - window) * res, dt = cand.th * dtheta;
+        const double penalty = 0.01 * n_points *
+                               ((dx * dx + dy * dy) / (options_.correlative_xy * options_.correlative_xy) +
+                                dt * dt / (options_.correlative_theta * options_.correlative_theta));
+        const double value = s - penalty;
+        if (value > best) {
+          best = value;
+          best_pose = {seed[0] + dx, seed[1] + dy, wrap(seed[2] + dt)};
+        }
+      }
+  }
+  return best_pose;
+}
+
+// ---- ICP ---------------------------------------------------------------------
+
+struct ReferenceScan::Local {
+  Eigen::Vector3d T = Eigen::Vector3d::Zero();
+  int pairs = 0, overlap = 0, iterations = 0;
+  double rms = std::numeric_limits<double>::infinity();
+  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
+};
+
+ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::Vector3d& start,
+                                        const Eigen::Vector3d& seed) const {
+  Local out;
+  Eigen::Vector3d T = start;
+  // The weak prior Λ = diag(1/σ_xy², 1/σ_xy², 1/σ_θ²) on the seed keeps a
+  // direction the walls do not constrain (along a corridor) where the seed put it.
+  const Eigen::Vector3d prior(1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
+                              1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
+                              1.0 / (options_.seed_sigma_theta * options_.seed_sigma_theta));
+  const double point_weight = 1.0 / (point_sigma_ * point_sigma_);
   for (int it = 0; it < options_.max_iterations; ++it) {
-    const double max_distance = correspondence_distance(options_, it);
+    const double max_distance =
+        correspondence_distance(std::max(options_.max_correspondence, min_correspondence_), min_correspondence_,
+                                options_.max_iterations, it);
     const Eigen::Matrix2d R = rotation(T[2]);
     const Eigen::Matrix2d dR = rotation(T[2] + 0.5 * std::numbers::pi);  // ∂R/∂θ
     Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     double weighted_r2 = 0.0, weight_sum = 0.0;
-    int pairs = 0;
+    int pairs = 0, overlap = 0;
     for (const auto& q : current) {
       const Eigen::Vector2d moved = R * q + T.head<2>();
-      const int j = nearest(moved, max_distance);
+      if (in_view(moved)) ++overlap;
+      const int j = nearest_by_bearing(moved);
       if (j < 0) continue;
+      const Eigen::Vector2d d = moved - points_[static_cast<std::size_t>(j)];
       const Eigen::Vector2d& n = normals_[static_cast<std::size_t>(j)];
-      const double r = n.dot(moved - points_[static_cast<std::size_t>(j)]);
-      const double w = std::abs(r) <= options_.huber ? 1.0 : options_.huber / std::abs(r);
+      const double r = n.dot(d);  // across the line
+      // Gate: the point-to-line residual within the correspondence distance,
+      // and the partner within that distance too or, where the beams are
+      // sparser (far away), within gate_beams beam spacings at its range: the
+      // nearest beam on the same wall can be that far along it.
+      const double gate =
+          std::max(max_distance, options_.gate_beams * points_[static_cast<std::size_t>(j)].norm() * spacing_);
+      if (std::abs(r) > max_distance || d.squaredNorm() > gate * gate) continue;
+      const double w = std::abs(r) <= huber_ ? 1.0 : huber_ / std::abs(r);
       // ∂r/∂(dx, dy, dθ) = (nᵀ, nᵀ ∂R/∂θ q).
       const Eigen::Vector3d J(n.x(), n.y(), n.dot(dR * q));
-      H += w * J * J.transpose();
+      H.noalias() += w * J * J.transpose();
       g += w * J * r;
       weighted_r2 += w * r * r;
       weight_sum += w;
       ++pairs;
     }
-    result.pairs = pairs;
-    result.iterations = it + 1;
-    if (pairs < options_.min_pairs) return result;  // ok = false: keep the seed
-    result.rms = std::sqrt(weighted_r2 / weight_sum);
-    // Gauss–Newton step on  Σ w r²/σ_p² + (T − seed)ᵀ Λ (T − seed): the weak
-    // prior Λ = diag(1/σ_xy², 1/σ_xy², 1/σ_θ²) on the seed keeps a direction
-    // the walls do not constrain (along a corridor) where the seed put it.
-    const double point_weight = 1.0 / (options_.point_sigma * options_.point_sigma);
-    const Eigen::Vector3d prior(1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
-                                1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
-                                1.0 / (options_.seed_sigma_theta * options_.seed_sigma_theta));
+    out.pairs = pairs;
+    out.overlap = overlap;
+    out.iterations = it + 1;
+    out.T = T;
+    out.information = point_weight * H;
+    if (pairs < std::max(3, options_.min_pairs)) {
+      out.rms = std::numeric_limits<double>::infinity();
+      return out;
+    }
+    out.rms = std::sqrt(weighted_r2 / weight_sum);
+    // Gauss–Newton step on  Σ w r²/σ_p² + (T − seed)ᵀ Λ (T − seed).
     const Eigen::Matrix3d A = point_weight * H + Eigen::Matrix3d(prior.asDiagonal());
     const Eigen::Vector3d b = point_weight * g + prior.cwiseProduct(T - seed);
     const Eigen::Vector3d step = -A.ldlt().solve(b);
     T += step;
-    const bool at_final_distance = max_distance <= options_.min_correspondence + 1e-12;
+    T[2] = wrap(T[2]);
+    out.T = T;
+    const bool at_final_distance = max_distance <= min_correspondence_ + 1e-12;
     if (at_final_distance && step.head<2>().norm() < options_.converged_step &&
         std::abs(step[2]) < options_.converged_step)
       break;
   }
-  result.increment = T;
-  result.ok = result.rms <= options_.max_rms;
+  return out;
+}
+
+MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vector3d& seed) const {
+  // Neighbouring beams of a dense scan (0.25°) on one wall add little: at most
+  // max_points evenly spread beams are matched.
+  const ScanPoints current = subsample(all_current, options_.max_points);
+  MatchResult result;
+  result.noise = noise_;
+  result.increment = seed;
+  auto ok = [&](const Local& l) {
+    const double needed = std::max(static_cast<double>(options_.min_pairs), options_.min_pair_fraction * l.overlap);
+    return l.pairs >= needed && l.rms <= max_rms_;
+  };
+  auto weak = [&](const Local& l) { return !ok(l) || l.pairs < options_.weak_pair_fraction * l.overlap; };
+
+  Local best = icp(current, heading_search(current, seed), seed);
+  bool from_correlative = false;
+  if (options_.correlative && weak(best)) {
+    const Local other = icp(current, correlative_search(current, seed), seed);
+    // The better match: a valid one over an invalid one; between two valid
+    // ones the correlative one only with clearly more pairs (a quarter more):
+    // with about as many, the scene is ambiguous and the match nearer the
+    // seed (the local one) is the safer choice.
+    if ((ok(other) && !ok(best)) || (ok(other) && ok(best) && other.pairs > 1.25 * best.pairs) ||
+        (!ok(other) && !ok(best) && other.pairs > best.pairs)) {
+      best = other;
+      from_correlative = true;
+    }
+  }
+  result.pairs = best.pairs;
+  result.overlap = best.overlap;
+  result.rms = std::isfinite(best.rms) ? best.rms : 0.0;
+  result.iterations = best.iterations;
+  result.correlative = from_correlative;
+  result.information = best.information;
+  result.ok = ok(best);
+  if (result.ok) result.increment = best.T;
+  const Eigen::Vector3d prior(1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
+                              1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
+                              1.0 / (options_.seed_sigma_theta * options_.seed_sigma_theta));
+  // Covariance of the increment: the pairs' information, deflated for the
+  // correlation of neighbouring beams on one wall, plus the seed prior.
+  const Eigen::Matrix3d info = result.ok ? Eigen::Matrix3d(best.information / options_.information_deflation)
+                                         : Eigen::Matrix3d::Zero();
+  result.covariance = (info + Eigen::Matrix3d(prior.asDiagonal())).inverse();
+  // Weakest direction: the information's smallest eigenpair, θ in metres at
+  // 1 m (D = diag(1, 1, 1/1 m) leaves the numbers as they are).
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(best.information);
+  result.weakest_information = eig.eigenvalues()[0];
+  result.weakest_direction = eig.eigenvectors().col(0);
   return result;
+}
+
+// ---- Mounted laser ------------------------------------------------------------
+
+Eigen::Vector3d LaserOdometry::robot_increment(const Eigen::Vector3d& d_l, Eigen::Matrix3d* jacobian) const {
+  // Robot poses R1, R2; laser poses L = R ⊕ m. d_l = L1⁻¹ ⊕ L2 = m⁻¹ ⊕ d_r ⊕ m,
+  // so d_r = m ⊕ d_l ⊕ m⁻¹:  t_r = t_m + R(φ_m) t_l − R(θ_l) t_m, θ_r = θ_l
+  // (planar rotations commute).
+  const Eigen::Vector3d d_r = compose(compose(mount_, d_l), inverse(mount_));
+  if (jacobian != nullptr) {
+    // ∂t_r/∂t_l = R(φ_m), ∂t_r/∂θ_l = −R'(θ_l) t_m, ∂θ_r/∂θ_l = 1.
+    jacobian->setZero();
+    jacobian->topLeftCorner<2, 2>() = rotation(mount_[2]);
+    jacobian->block<2, 1>(0, 2) = -(rotation(d_l[2] + 0.5 * std::numbers::pi) * mount_.head<2>());
+    (*jacobian)(2, 2) = 1.0;
+  }
+  return d_r;
+}
+
+Eigen::Vector3d LaserOdometry::laser_increment(const Eigen::Vector3d& d_r) const {
+  return compose(compose(inverse(mount_), d_r), mount_);
+}
+
+OdometryResult LaserOdometry::match(const ScanPoints& previous, const ScanPoints& current,
+                                    const Eigen::Vector3d& robot_seed) const {
+  return match(ReferenceScan(previous, options_), current, robot_seed);
+}
+
+OdometryResult LaserOdometry::match(const ReferenceScan& previous, const ScanPoints& current,
+                                    const Eigen::Vector3d& robot_seed) const {
+  OdometryResult out;
+  out.match = previous.match(current, laser_increment(robot_seed));
+  Eigen::Matrix3d J;
+  out.increment = out.match.ok ? robot_increment(out.match.increment, &J) : robot_seed;
+  if (!out.match.ok) robot_increment(out.match.increment, &J);
+  // C_r = J C_l Jᵀ (first order; exact for the translation part).
+  out.covariance = J * out.match.covariance * J.transpose();
+  return out;
 }
 
 }  // namespace mspace::scan_matching

@@ -1,28 +1,63 @@
 // scan_matcher.hpp — laser odometry: the motion between two 2-D laser scans by
-// point-to-line ICP (iterative closest point), seeded with wheel odometry.
+// point-to-line ICP (iterative closest point), seeded with wheel odometry, with
+// a coarse-to-fine correlative search when the local match is weak.
 //
 // Used by data sources that replay 2-D laser logs (carmen_log's
 // `odometry: scan_matched`) to replace poor wheel odometry with the motion
-// the laser sees. It is a front end only: the SLAM estimator still treats the
-// result as an odometry increment with the motion model's noise.
+// the laser sees, and by tests and benchmarks directly. Any planar laser:
+// 180–1080 beams, 0.25–1° apart, interleaved or varying start angles (the
+// beam spacing is measured from each scan, not configured), ranges to 80 m,
+// no-return and error codes dropped before (scan_to_points).
 //
-// Method. The reference scan's points get a normal each from a total-least-
-// squares line through their neighbouring beams (points whose neighbourhood is
-// not a line — corners, clutter — get none and are not used). For an increment
-// T = (dx, dy, dθ) (the current scan's pose in the reference scan's frame) each
-// current point q is moved to T·q, paired with its nearest reference point p
-// within a correspondence distance, and contributes the residual
-//   r = nᵀ (T·q − p)
-// (its distance to the reference point's tangent line). Wheel odometry's
-// heading error (several degrees a step) moves far points by more than any
-// sensible pairing distance, so the heading is first searched on a grid of
-// ± `heading_search` around the seed for the largest overlap of the scans. Gauss–Newton on the
-// Huber-weighted sum of r² plus a weak prior on the seed (so a direction the
-// scans do not constrain, along a corridor, stays where the seed put it) gives
-// the update of T; the correspondence distance
-// shrinks from `max_correspondence` to `min_correspondence` over the iterations.
-// The match fails (and the caller keeps its seed) when too few pairs remain or
-// the final robust RMS residual is too large.
+// Method (ReferenceScan::match).
+//  1. Reference scan: each point gets a normal from a total-least-squares line
+//     through its neighbouring beams; neighbours are taken while consecutive
+//     points are closer than max(normal_radius, gap_beams · ρ · δ) — ρ the
+//     range, δ the scan's median beam spacing — so sparse far beams on a wall
+//     still form a line. A neighbourhood rougher than max(max_line_rms,
+//     line_rms_factor · σ_n) gets no normal (corners, clutter); σ_n, the range
+//     noise, is estimated from the scan itself (median line-fit RMS).
+//  2. Correspondences by angle (projective association): a current point
+//     moved into the reference frame, q' = T·q, is looked up by its bearing
+//     among the reference points sorted by bearing, and paired with the
+//     nearest of the ±association_window reference points around that
+//     bearing. The pair is kept when its point-to-line residual
+//     r = nᵀ (q' − p) is within the correspondence distance d (shrinking from
+//     max_correspondence to max(min_correspondence, 4 σ_n)) and q' is within
+//     max(d, gate_beams · ρ_p · δ) of p: where the beams are sparser than d
+//     (far away) the nearest beam on the same wall may be half a beam spacing
+//     along it, so 80 m beams 1° apart (1.4 m) still pair while near beams
+//     keep the tight point distance that also constrains sliding along walls.
+//  3. Heading search: wheel odometry's heading error (several degrees) moves
+//     far points beyond any pairing distance, so headings within
+//     ±heading_search of the seed are scored by overlap first (Σ 1 − (d/R)²
+//     over current points within R = max(search_radius, ρ_p · δ) of their
+//     partner, at most 180 points).
+//  4. Gauss–Newton on the Huber-weighted Σ r²/σ² plus a weak prior on the seed
+//     (a direction the scans do not constrain, along a corridor, stays where
+//     the seed put it).
+//  5. Quality relative to the data: `overlap` is the number of current points
+//     that land inside the reference scan's field of view and range at the
+//     result; the match is ok when pairs ≥ max(min_pairs, min_pair_fraction ·
+//     overlap) and the robust RMS ≤ max(max_rms, 3 σ_n).
+//  6. When that local match is weak (not ok, or pairs < weak_pair_fraction ·
+//     overlap), a correlative search (Olson 2009, "Real-time correlative scan
+//     matching"; what Cartographer and Hector do): the reference scan is drawn
+//     into a likelihood grid; every heading in ±correlative_theta and every
+//     translation in ±correlative_xy around the seed is scored by the summed
+//     likelihood of the current points, coarse-to-fine by branch and bound
+//     over a max-pooled grid (exact: the coarse score bounds the fine ones);
+//     ICP is rerun from the best pose and the better of the two matches kept.
+//
+// Each result carries its quality: pairs, residual, overlap, the information
+// matrix Σ JᵀJ/σ² of the pairs (its smallest eigen-direction is the one the
+// scene leaves weak, e.g. along a corridor) and a covariance for the motion
+// model (the information deflated for correlated neighbouring residuals, plus
+// the seed prior).
+//
+// LaserOdometry wraps this for a laser mounted at x_rs on the robot: it turns a
+// robot seed into a laser seed and the laser increment (and covariance) into
+// robot motion, increment_robot = x_rs ⊕ increment_laser ⊖ x_rs.
 #pragma once
 
 #include <Eigen/Core>
@@ -31,43 +66,77 @@
 namespace mspace::scan_matching {
 
 /// A scan as points in its own frame (m). Beam order is kept: the normals are
-/// fitted to neighbouring beams.
+/// fitted to neighbouring beams and correspondences are looked up by bearing.
 using ScanPoints = std::vector<Eigen::Vector2d>;
 
-/// (range, bearing) pairs → points; ranges ≤ 0 or ≥ max_range are dropped.
+/// (range, bearing) pairs → points; ranges ≤ 0 or ≥ max_range (and non-finite
+/// ones) are dropped.
 ScanPoints scan_to_points(const std::vector<double>& ranges, const std::vector<double>& bearings,
                           double max_range);
 
 struct MatchOptions {
-  double heading_search = 0.2;       ///< rad: headings within ± this of the seed are tried first (0: none)
-  double heading_search_step = 0.01; ///< rad
-  double search_radius = 0.3;        ///< m: a point within this of a reference point counts as overlap
+  double heading_search = 0.2;        ///< rad: headings within ± this of the seed are tried first (0: none)
+  double heading_search_step = 0.01;  ///< rad
+  double search_radius = 0.3;         ///< m: overlap radius of the heading search (or the beam gap, if larger)
   int max_iterations = 30;
-  double max_correspondence = 0.5;   ///< m, first iteration
-  double min_correspondence = 0.1;   ///< m, reached at the last iterations
-  int normal_neighbours = 3;         ///< beams on each side used for a reference point's normal
-  double normal_radius = 0.15;       ///< m: largest gap between neighbouring points used for a normal…
-  double gap_per_m = 0.05;           ///< …or this times the range, if larger (far beams spread)
-  double max_line_rms = 0.02;        ///< m: a neighbourhood rougher than this gives no normal
-  double huber = 0.03;               ///< m: residuals beyond this are down-weighted
-  double point_sigma = 0.02;         ///< m: σ of one point-to-line residual
-  double seed_sigma_xy = 0.1;        ///< m: σ of the seed's translation (a weak prior)
-  double seed_sigma_theta = 0.1;     ///< rad: σ of the seed's rotation
-  int min_pairs = 20;                ///< fewer paired points: the match fails
-  double max_rms = 0.05;             ///< m: larger final robust RMS residual: the match fails
-  double converged_step = 1e-5;      ///< stop when the update is below this (m and rad)
+  int max_points = 400;             ///< current points matched, evenly subsampled (0: all)
+  double max_correspondence = 0.5;  ///< m, first iteration
+  double min_correspondence = 0.1;  ///< m, reached at the last iterations (at least 4 σ_n)
+  int normal_neighbours = 3;        ///< beams on each side used for a reference point's normal
+  double gate_beams = 0.5;          ///< pairs may be this many beam spacings apart (at the partner's range) where that exceeds the correspondence distance
+  int association_window = 4;       ///< usable reference beams on each side of a point's bearing searched for its partner
+  double normal_radius = 0.15;      ///< m: largest gap between neighbouring points used for a normal…
+  /// …or this many beam spacings at the point's range, if larger: 2.865 beams
+  /// = a gap of 0.05 rad × range, i.e. walls seen at up to 70° incidence (at
+  /// the Intel laser's 1° the 0.05 m per m the matcher used before).
+  double gap_beams = 2.865;
+  double max_line_rms = 0.02;       ///< m: a neighbourhood rougher than this (or line_rms_factor σ_n) gives no normal
+  double line_rms_factor = 3.0;
+  double huber = 0.03;              ///< m: residuals beyond this (or 1.5 σ_n) are down-weighted
+  double point_sigma = 0.02;        ///< m: σ of one point-to-line residual (at least σ_n)
+  double seed_sigma_xy = 0.1;       ///< m: σ of the seed's translation (a weak prior)
+  double seed_sigma_theta = 0.1;    ///< rad: σ of the seed's rotation
+  int min_pairs = 10;               ///< absolute floor of paired points for a match
+  double min_pair_fraction = 0.15;  ///< …and at least this fraction of the overlapping points (cluttered Intel scans: correct matches down to 0.19)
+  double max_rms = 0.05;            ///< m: larger final robust RMS (and > 3 σ_n) fails the match
+  double converged_step = 1e-5;     ///< stop when the update is below this (m and rad)
+  /// Residuals of neighbouring beams on one wall are correlated (a wall is one
+  /// measurement, not N): the information Σ JᵀJ/σ² is divided by this for the
+  /// covariance handed to the motion model.
+  double information_deflation = 10.0;
+  // Correlative search (fallback when the local match is weak).
+  bool correlative = true;
+  double weak_pair_fraction = 0.5;     ///< pairs below this fraction of the overlap: search
+  double correlative_xy = 0.6;         ///< m: translation window ± around the seed
+  double correlative_theta = 0.5;      ///< rad: heading window ± around the seed
+  double correlative_resolution = 0.05;  ///< m: fine grid cell (at least 2 σ_n)
+  int correlative_coarse = 4;          ///< fine cells per coarse cell (each way)
+  double correlative_max_range = 20.0; ///< m: points beyond are not drawn or scored
+  int correlative_max_points = 300;    ///< current points scored (evenly subsampled)
 };
 
 struct MatchResult {
   Eigen::Vector3d increment = Eigen::Vector3d::Zero();  ///< (dx, dy, dθ) of the current scan in the reference frame
-  bool ok = false;   ///< false: keep the seed (too few pairs or a large residual)
-  int pairs = 0;     ///< paired points in the last iteration
-  double rms = 0.0;  ///< RMS point-to-line residual of the pairs (m)
+  bool ok = false;       ///< false: keep the seed (too few pairs or a large residual)
+  int pairs = 0;         ///< paired points in the last iteration
+  int overlap = 0;       ///< current points inside the reference's field of view and range at the result
+  double rms = 0.0;      ///< robust RMS point-to-line residual of the pairs (m)
   int iterations = 0;
+  bool correlative = false;  ///< the correlative search seeded the kept match
+  double noise = 0.0;        ///< σ_n: range noise estimated from the reference scan (m)
+  /// Σ JᵀJ/σ² over the pairs (no prior), in (m, m, rad): what the laser alone says.
+  Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
+  /// (information / information_deflation + seed prior)⁻¹: the increment's covariance.
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();
+  /// Smallest eigenvalue of the information with θ expressed in metres at 1 m
+  /// (so translation and rotation compare), and its unit eigenvector (dx, dy, dθ·1 m):
+  /// the direction the scene constrains least (along a corridor: ≈ the corridor's axis).
+  double weakest_information = 0.0;
+  Eigen::Vector3d weakest_direction = Eigen::Vector3d::Zero();
 };
 
-/// A reference scan prepared once (points sorted for the nearest-neighbour
-/// search, normals fitted) and matched against any number of scans.
+/// A reference scan prepared once (normals fitted, points indexed by bearing,
+/// noise estimated) and matched against any number of scans.
 class ReferenceScan {
  public:
   ReferenceScan(const ScanPoints& points, const MatchOptions& options);
@@ -77,18 +146,72 @@ class ReferenceScan {
 
   /// Reference points that received a normal.
   int usable_points() const { return static_cast<int>(points_.size()); }
+  /// σ_n: median RMS of the line fits (m), a range-noise estimate.
+  double noise() const { return noise_; }
+  /// Median angular spacing of consecutive beams (rad).
+  double beam_spacing() const { return spacing_; }
 
  private:
-  /// Σ over current points paired within `radius` of (1 − (d/radius)²) at T.
-  double overlap_score(const ScanPoints& current, const Eigen::Vector3d& T, double radius) const;
+  struct Local;  // one ICP run's result
+  /// Point-to-line ICP from `start` (the prior stays on `seed`).
+  Local icp(const ScanPoints& current, const Eigen::Vector3d& start, const Eigen::Vector3d& seed) const;
   /// The seed with the heading of most overlap within ± heading_search.
   Eigen::Vector3d heading_search(const ScanPoints& current, const Eigen::Vector3d& seed) const;
-  /// Index into points_ of the nearest point within `max_distance`, or −1.
-  int nearest(const Eigen::Vector2d& q, double max_distance) const;
+  /// Best pose of the correlative search around `seed` (Olson 2009), or the seed.
+  Eigen::Vector3d correlative_search(const ScanPoints& current, const Eigen::Vector3d& seed) const;
+  /// Index into points_ of the nearest reference point among those around
+  /// q's bearing, or −1 (q in the reference frame).
+  int nearest_by_bearing(const Eigen::Vector2d& q) const;
+  /// Largest gap between neighbouring beams at range ρ (m).
+  double beam_gap(double range) const;
+  bool in_view(const Eigen::Vector2d& q) const;
 
   MatchOptions options_;
-  std::vector<Eigen::Vector2d> points_;   ///< usable points, sorted by x
+  std::vector<Eigen::Vector2d> points_;   ///< usable points, sorted by bearing
   std::vector<Eigen::Vector2d> normals_;  ///< unit normal of each
+  std::vector<double> bearings_;          ///< bearing of each (ascending)
+  ScanPoints all_points_;                 ///< every reference point, in beam order (for the correlative grid)
+  double noise_ = 0.0;
+  double spacing_ = 0.0;
+  double min_bearing_ = 0.0, max_bearing_ = 0.0, max_range_ = 0.0;
+  bool full_circle_ = false;
+  // Effective thresholds (the options' floors raised by the measured noise).
+  double min_correspondence_ = 0.1, huber_ = 0.03, point_sigma_ = 0.02, max_rms_ = 0.05;
+};
+
+/// Planar pose algebra on (x, y, θ).
+Eigen::Vector3d compose(const Eigen::Vector3d& a, const Eigen::Vector3d& b);  ///< a ⊕ b
+Eigen::Vector3d inverse(const Eigen::Vector3d& a);                            ///< ⊖ a
+
+/// Laser odometry for a laser mounted at x_rs = (x, y, θ) on the robot.
+struct OdometryResult {
+  Eigen::Vector3d increment = Eigen::Vector3d::Zero();  ///< robot motion (dx, dy, dθ) in the previous robot frame
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();  ///< of `increment` (robot frame)
+  MatchResult match;  ///< the laser-frame match and its quality figures
+};
+
+class LaserOdometry {
+ public:
+  LaserOdometry(const Eigen::Vector3d& mount, const MatchOptions& options) : mount_(mount), options_(options) {}
+
+  /// Robot motion from `previous` to `current` (points in the laser frame),
+  /// seeded with the robot motion `robot_seed` (wheel odometry). When the match
+  /// fails, increment = robot_seed and match.ok = false.
+  OdometryResult match(const ScanPoints& previous, const ScanPoints& current, const Eigen::Vector3d& robot_seed) const;
+  OdometryResult match(const ReferenceScan& previous, const ScanPoints& current,
+                       const Eigen::Vector3d& robot_seed) const;
+
+  /// d_r = x_rs ⊕ d_l ⊖ x_rs and its Jacobian ∂d_r/∂d_l.
+  Eigen::Vector3d robot_increment(const Eigen::Vector3d& laser_increment, Eigen::Matrix3d* jacobian = nullptr) const;
+  /// d_l = ⊖x_rs ⊕ d_r ⊕ x_rs.
+  Eigen::Vector3d laser_increment(const Eigen::Vector3d& robot_increment) const;
+
+  const Eigen::Vector3d& mount() const { return mount_; }
+  const MatchOptions& options() const { return options_; }
+
+ private:
+  Eigen::Vector3d mount_;
+  MatchOptions options_;
 };
 
 }  // namespace mspace::scan_matching

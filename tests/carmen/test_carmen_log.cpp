@@ -3,16 +3,21 @@
 // increments, malformed lines (error or counted skip) and the real file.
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
+
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "carmen_log.hpp"
 #include "carmen_reader.hpp"
+#include "laser_sim.hpp"
 
 namespace mspace::carmen_log {
 namespace {
@@ -195,6 +200,152 @@ TEST(CarmenLog, IntelTableTimesAndOdometryMatchTheFile) {
     ASSERT_NEAR(odo[1], rows[k][2], 1e-9) << "scan " << k;
     ASSERT_NEAR(std::remainder(odo[2] - rows[k][3], 2 * kPi), 0.0, 1e-9) << "scan " << k;
   }
+}
+
+
+// ---- Issue 18: what the log says about its laser -----------------------------
+
+namespace laser_log = mspace::test_laser::robotlaser_log;
+namespace tl = mspace::test_laser;
+
+// The issue's log, with only the file changed in the configuration: the
+// no-return value, the error codes and the laser offset come from the log,
+// laser odometry matches (almost) every increment for the robot (not the
+// laser) and hands each one's covariance on.
+TEST(CarmenLaser, IssueLogReadsItsLaserFromTheDataAndMatches) {
+  const auto file = write_temp("mspace_issue18.clf", "");
+  const std::vector<Eigen::Vector3d> truth = laser_log::write(file, {});
+  PluginArgs a = args_for(file);
+  a.params.set("odometry", std::string("scan_matched"));
+  CarmenLogSource source(a);
+  const LaserFacts& facts = source.contents().laser;
+  ASSERT_TRUE(facts.detected_no_return);
+  EXPECT_DOUBLE_EQ(facts.no_return, 81.9);
+  EXPECT_NE(facts.no_return_origin.find("mspace_issue18.clf:"), std::string::npos) << facts.no_return_origin;
+  EXPECT_NEAR(facts.detected_fraction, 0.12, 0.03);
+  ASSERT_EQ(facts.error_codes.size(), 1u);
+  EXPECT_DOUBLE_EQ(facts.error_codes[0], 81.83);
+  ASSERT_TRUE(facts.offset);
+  EXPECT_NEAR((*facts.offset)[0], 0.22, 1e-6);
+  EXPECT_TRUE(facts.warnings.empty()) << facts.warnings.front();
+  EXPECT_NEAR(source.laser_mount()[0], 0.22, 1e-6);
+  const std::vector<RecordedMount> mounts = source.recorded_mounts();
+  ASSERT_EQ(mounts.size(), 1u);
+  EXPECT_EQ(mounts[0].channel, "laser");
+  EXPECT_NEAR(mounts[0].mount[kX], 0.22, 1e-6);
+
+  DataStep s;
+  int steps = 0, with_covariance = 0, codes_left = 0;
+  std::vector<double> laser_xy, wheel_xy, laser_th, wheel_th;
+  const auto& scans = source.contents().scans;
+  ASSERT_TRUE(source.next(s));  // the first scan has no increment
+  for (std::size_t k = 1; source.next(s); ++k) {
+    ++steps;
+    for (Eigen::Index i = 0; i < s.readings[0].values.rows(); ++i)
+      codes_left += s.readings[0].values(i, 0) > 80.0 ? 1 : 0;
+    ASSERT_EQ(s.odometry.size(), 3);
+    if (s.odometry_covariance.size() > 0) {
+      ++with_covariance;
+      ASSERT_EQ(s.odometry_covariance.rows(), 3);
+      EXPECT_GT(s.odometry_covariance.determinant(), 0.0);
+    }
+    const Eigen::Vector3d t = mspace::test_laser::relative(truth[k - 1], truth[k]);
+    (void)scans;
+    laser_xy.push_back((s.odometry.head<2>() - t.head<2>()).norm());
+    laser_th.push_back(std::abs(std::remainder(s.odometry[2] - t[2], 2 * kPi)));
+  }
+  EXPECT_EQ(codes_left, 0);  // no-return and error codes all read as 0
+  EXPECT_GE(with_covariance, static_cast<int>(std::ceil(0.98 * steps)));
+  // The wheel increments of the same log.
+  PluginArgs w = args_for(file);
+  CarmenLogSource wheel(w);
+  ASSERT_TRUE(wheel.next(s));
+  for (std::size_t k = 1; wheel.next(s); ++k) {
+    const Eigen::Vector3d t = mspace::test_laser::relative(truth[k - 1], truth[k]);
+    wheel_xy.push_back((s.odometry.head<2>() - t.head<2>()).norm());
+    wheel_th.push_back(std::abs(std::remainder(s.odometry[2] - t[2], 2 * kPi)));
+    EXPECT_EQ(s.odometry_covariance.size(), 0);  // wheel odometry: the motion model's noise
+  }
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  std::printf("issue log: %d of %d increments matched; xy median %.4f m (wheel %.4f), heading median %.3f deg "
+              "(wheel %.3f)\n",
+              with_covariance, steps, median(laser_xy), median(wheel_xy), median(laser_th) * 180 / kPi,
+              median(wheel_th) * 180 / kPi);
+  EXPECT_LE(median(laser_xy), 0.5 * median(wheel_xy));
+  EXPECT_LE(median(laser_th), 0.5 * median(wheel_th));
+}
+
+// Another building's log: no return is 50.0. Configured as 81.9 (the issue's
+// user copied it), the 50.0 beams would become walls: an error with file:line.
+TEST(CarmenLaser, ContradictedNoReturnValueIsAnErrorWithFileAndLine) {
+  laser_log::Options o;
+  o.no_return = 50.0;
+  o.error_code = 0.0;
+  o.param_lines = false;
+  o.scans = 30;
+  const auto file = write_temp("mspace_issue18_50.clf", "");
+  laser_log::write(file, o);
+  PluginArgs a = args_for(file);
+  a.params.set("no_return_range", 81.9);
+  try {
+    CarmenLogSource source(a);
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("mspace_issue18_50.clf:2: no_return_range is 81.9"), std::string::npos) << what;
+    EXPECT_NE(what.find("exactly 50"), std::string::npos) << what;
+  }
+  // With no_return_range 0 (the default) the log's value is used.
+  CarmenLogSource source(args_for(file));
+  EXPECT_DOUBLE_EQ(source.contents().laser.no_return, 50.0);
+}
+
+// A configured laser offset that the ROBOTLASER1 poses contradict is an error;
+// a PARAM that contradicts the poses is a warning (the poses are the data).
+TEST(CarmenLaser, ContradictedLaserOffset) {
+  laser_log::Options o;
+  o.param_offset = 0.30;
+  o.scans = 20;
+  const auto file = write_temp("mspace_issue18_offset.clf", "");
+  laser_log::write(file, o);
+  CarmenLogSource source(args_for(file));
+  const LaserFacts& facts = source.contents().laser;
+  ASSERT_TRUE(facts.offset);
+  EXPECT_NEAR((*facts.offset)[0], 0.22, 1e-6);
+  ASSERT_EQ(facts.warnings.size(), 1u);
+  EXPECT_NE(facts.warnings[0].find("mspace_issue18_offset.clf:3 (PARAM"), std::string::npos) << facts.warnings[0];
+  PluginArgs a = args_for(file);
+  a.params.set("laser_offset", std::vector<double>{0.0, 0.0, 0.0});
+  try {
+    CarmenLogSource wrong(a);
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("mspace_issue18_offset.clf:4 (ROBOTLASER1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("laser_offset is [0, 0, 0°]"), std::string::npos) << e.what();
+  }
+  a.params.set("laser_offset", std::vector<double>{0.22, 0.0, 0.0});
+  EXPECT_NO_THROW(CarmenLogSource{a});
+}
+
+// The Intel table records no offset and no maximum range; its no-return value
+// (81.83) is found in the data and is above the configured 81.0.
+TEST(CarmenLaser, IntelTableNoReturnDetected) {
+  const std::filesystem::path file =
+      std::filesystem::path(MSPACE_SOURCE_DIR) / "../shared/datasets/intel_lab/intel_910_scans.txt";
+  if (!std::filesystem::exists(file)) GTEST_SKIP() << file << " not found; skipping";
+  PluginArgs a = args_for(file);
+  a.params.set("no_return_range", 81.0);
+  CarmenLogSource source(a);
+  const LaserFacts& facts = source.contents().laser;
+  ASSERT_TRUE(facts.detected_no_return);
+  std::printf("Intel: %.2f %% of the ranges are exactly %.2f\n", 100 * facts.detected_fraction, *facts.detected_no_return);
+  EXPECT_GE(*facts.detected_no_return, 81.0);
+  EXPECT_TRUE(facts.warnings.empty());
+  EXPECT_FALSE(facts.offset);
+  EXPECT_TRUE(source.recorded_mounts().empty());
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "config.hpp"
+#include "laser_sim.hpp"
 #include "logging.hpp"
 #include "plugin_registry.hpp"
 #include "relations.hpp"
@@ -187,6 +188,31 @@ TEST_F(WallRun, IntelLabRelationsWithinTarget) {
             << " ± " << e.rotation_deg.std << " deg (squared " << e.rotation_sq_deg.mean << " deg²)\n";
   EXPECT_EQ(e.matched, 90u);
   EXPECT_LE(e.translation.mean, 0.10);
+}
+
+// Issue 18: a log that records its laser 0.22 m ahead of the robot (the
+// ROBOTLASER1 laser poses) refuses a configuration whose sensor mount says
+// otherwise, naming the log's file and line; with the recorded mount the run
+// goes through on laser odometry for the robot.
+TEST_F(WallRun, RecordedLaserOffsetMustMatchTheSensorMount) {
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / "mspace_issue18_kernel.clf";
+  test_laser::robotlaser_log::Options o;
+  o.scans = 40;
+  test_laser::robotlaser_log::write(file, o);
+  auto config = [&](const std::string& mount) {
+    return "run: {name: issue18}\nsource: {plugin: carmen_log, file: " + file.string() +
+           ", odometry: scan_matched}\nmotion: {plugin: odometry2d}\nestimator: {plugin: ekf}\n"
+           "features: {wall: {plugin: wall}}\nsensors:\n  laser:\n    channel: laser\n    mount: [" +
+           mount + ", 0, 0, 0, 0, 0]\n    extractor: {plugin: laser_lines}\n    feeds: [wall]\n";
+  };
+  try {
+    run(parse_config(config("0"), "issue18.yaml", registry_));
+    FAIL() << "expected the configured mount to be refused";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("mspace_issue18_kernel.clf:4"), std::string::npos) << e.what();
+  }
+  const RunResult r = run(parse_config(config("0.22"), "issue18.yaml", registry_));
+  EXPECT_EQ(r.summary.steps, 40);
 }
 
 }  // namespace

@@ -29,6 +29,11 @@ struct DataStep {
   /// Which coordinates of ground_truth are known, as bits (1 << PoseIndex):
   /// all six by default; a GPS fix knows only (1 << kX) | (1 << kY).
   std::uint8_t ground_truth_known = kAllPoseCoords;
+  /// Covariance of `odometry` for this step when the source knows it (d × d,
+  /// e.g. laser odometry from the scan match's information, see
+  /// sensors_plugins/scan_matching); empty: the motion model's own noise C_d.
+  /// A kernel that honours it uses it as C_d in eq. 26 in place of the model's.
+  Eigen::MatrixXd odometry_covariance;
 };
 
 /// A sensor mount recorded with the data (e.g. in a camera calibration file).

@@ -1,0 +1,101 @@
+// Laser odometry speed (issue 18: ≥ 500 increments/s on one core for
+// 1080-beam scans): consecutive scans of a simulated 1080-beam, 0.25°, 270°
+// laser (2 cm noise, 0.22 m ahead of the robot) in the office floor and the
+// hall of tests/fixtures/laser_sim.hpp, logged every 0.6 s at 0.6 m/s and
+// 60°/s, seeded with noisy wheel odometry. One iteration = one increment:
+// preparing the reference scan (normals, noise) and matching, as the
+// carmen_log source does. Run e.g.
+//   ./build/bin/bench_scan_matching --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+#include <benchmark/benchmark.h>
+
+#include <random>
+#include <vector>
+
+#include "laser_sim.hpp"
+#include "scan_matcher.hpp"
+
+namespace {
+
+namespace sm = mspace::scan_matching;
+namespace tl = mspace::test_laser;
+
+struct Increment {
+  sm::ScanPoints previous, current;
+  Eigen::Vector3d seed;
+};
+
+/// `far`: the seed is off by (−0.5 m, −0.45 m, −25°) besides the wheel noise,
+/// beyond the local match, so every increment needs the correlative search.
+std::vector<Increment> increments(const tl::World& world, int beams, double resolution_deg, double start_deg,
+                                  bool far = false) {
+  tl::Laser laser;
+  laser.beams = beams;
+  laser.resolution = resolution_deg * tl::kDeg;
+  laser.start = start_deg * tl::kDeg;
+  laser.max_range = 80.0;
+  laser.sigma = 0.02;
+  laser.mount_x = 0.22;
+  std::mt19937_64 rng(1);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const std::vector<Eigen::Vector3d> poses = tl::drive(world, 0.6, 60 * tl::kDeg, 0.6);
+  std::vector<Increment> out;
+  for (std::size_t i = 0; i + 1 < poses.size() && out.size() < 200; ++i) {
+    auto points = [&](const Eigen::Vector3d& pose, int k) {
+      const tl::SimScan s = tl::simulate(world, laser, pose, k, rng);
+      return sm::scan_to_points(s.ranges, s.bearings, laser.no_return - 1e-6);
+    };
+    const Eigen::Vector3d truth = tl::relative(poses[i], poses[i + 1]);
+    const double d = truth.head<2>().norm();
+    const Eigen::Vector3d noise((0.05 * d + 0.01) * n(rng), (0.05 * d + 0.01) * n(rng),
+                                (0.05 * std::abs(truth[2]) + tl::kDeg * d + 0.5 * tl::kDeg) * n(rng));
+    const Eigen::Vector3d offset = far ? Eigen::Vector3d(-0.5, -0.45, -25 * tl::kDeg) : Eigen::Vector3d::Zero();
+    out.push_back({points(poses[i], static_cast<int>(i)), points(poses[i + 1], static_cast<int>(i + 1)),
+                   truth + noise + offset});
+  }
+  return out;
+}
+
+void run(benchmark::State& state, const std::vector<Increment>& data) {
+  const sm::LaserOdometry odometry({0.22, 0.0, 0.0}, sm::MatchOptions{});
+  std::size_t k = 0;
+  int matched = 0, correlative = 0;
+  for (auto _ : state) {
+    const Increment& inc = data[k++ % data.size()];
+    const sm::OdometryResult r = odometry.match(inc.previous, inc.current, inc.seed);
+    matched += r.match.ok ? 1 : 0;
+    correlative += r.match.correlative ? 1 : 0;
+    benchmark::DoNotOptimize(r.increment);
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()));
+  state.counters["matched_pc"] = 100.0 * matched / static_cast<double>(state.iterations());
+  state.counters["correlative_pc"] = 100.0 * correlative / static_cast<double>(state.iterations());
+}
+
+void BM_Match1080Office(benchmark::State& state) {
+  static const std::vector<Increment> data = increments(tl::office_floor(), 1080, 0.25, -135.0);
+  run(state, data);
+}
+BENCHMARK(BM_Match1080Office)->Unit(benchmark::kMicrosecond);
+
+void BM_Match1080Hall(benchmark::State& state) {
+  static const std::vector<Increment> data = increments(tl::hall(), 1080, 0.25, -135.0);
+  run(state, data);
+}
+BENCHMARK(BM_Match1080Hall)->Unit(benchmark::kMicrosecond);
+
+// The correlative fallback's cost: seeds 0.67 m / 25° off.
+void BM_Match1080OfficeFarSeed(benchmark::State& state) {
+  static const std::vector<Increment> data = increments(tl::office_floor(), 1080, 0.25, -135.0, true);
+  run(state, data);
+}
+BENCHMARK(BM_Match1080OfficeFarSeed)->Unit(benchmark::kMicrosecond);
+
+void BM_Match181Office(benchmark::State& state) {
+  static const std::vector<Increment> data = increments(tl::office_floor(), 181, 1.0, -90.0);
+  run(state, data);
+}
+BENCHMARK(BM_Match181Office)->Unit(benchmark::kMicrosecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
