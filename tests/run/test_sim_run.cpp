@@ -101,8 +101,8 @@ TEST_F(SimRun, DefaultRunMeetsAccuracyBoundsAndBeatsDeadReckoning) {
 // The health report in a whole run: a sensor whose extractor finds nothing is
 // named in the summary (and the log), and an extractor that claims 10× less
 // noise than the simulated sensor has is flagged as overconfident; the
-// default run's figures stay in the consistent range (its NIS ratio is below 1
-// because the planar sensor "measures" a zero elevation with a made-up σ).
+// default run's figures stay in the consistent range (NIS ratio ≈ 1: the
+// planar sensor's measurements have two rows, no made-up elevation).
 // The gate truncates what an overconfident filter sees (innovations beyond it
 // start new features instead), so the ratio cannot grow without bound: with
 // 5× too little noise everywhere it reaches ≈ 1.7.
@@ -117,7 +117,7 @@ TEST_F(SimRun, SensorHealthNamesASilentSensorAndAnOverconfidentOne) {
     EXPECT_EQ(laser["readings"].as<std::int64_t>(), 1500);
     EXPECT_GT(laser["matched_fraction"].as<double>(), 0.8);
     const double ratio = laser["nis_ratio"].as<double>();
-    EXPECT_GT(ratio, 0.5);
+    EXPECT_GT(ratio, 0.8);
     EXPECT_LT(ratio, 1.2);
     EXPECT_EQ(laser["warnings"].size(), 0u);
   }
@@ -341,7 +341,11 @@ TEST_F(SimRun, WritesTrajectoryMapSummaryAndPicture) {
   const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
   EXPECT_EQ(summary["steps"].as<int>(), 800);
   EXPECT_NEAR(summary["ground_truth"]["ate_rmse_m"].as<double>(), r.summary.errors->ate_rmse, 1e-6);
-  EXPECT_EQ(summary["features"]["point"]["dim3"].as<int>(), initialised);
+  // A planar sensor: every point is in the map at M-space dimension 2, and the
+  // state is the robot's 3 plus 2 per point.
+  EXPECT_EQ(summary["features"]["point"]["dim2"].as<int>(), initialised);
+  EXPECT_FALSE(summary["features"]["point"]["dim3"]);
+  EXPECT_EQ(summary["state_dimension"].as<int>(), 3 + 2 * initialised);
 
   std::ifstream png(out_ / "map.png", std::ios::binary);
   char signature[8] = {};
