@@ -421,8 +421,7 @@ std::deque<PointObservation> restore_observations(const SavedFeature& s, const c
 
 PointFeature::PointFeature(const PointConfig& config, const SavedFeature& s) : config_(config) {
   // Version 1 (before planar points) is read too: the same arrays without the size row.
-  if (s.version != 1) saved::expect_layout(s, kSaveVersion, {"observations", "rays", "gating_covariance"}, "point");
-  else saved::expect_layout(s, 1, {"observations", "rays", "gating_covariance"}, "point");
+  saved::expect_layout(s, s.version == 1 ? 1 : kSaveVersion, {"observations", "rays", "gating_covariance"}, "point");
   const bool known_dim = s.mspace_dim == kTentativeDim || s.mspace_dim == kPlanarDim || s.mspace_dim == kFullDim;
   if (s.coords.size() != kDim || !s.coords.allFinite() || !known_dim || s.extra.size() != 0) {
     throw std::invalid_argument(
