@@ -435,7 +435,8 @@ PointFeature::PointFeature(const PointConfig& config, const SavedFeature& s) : c
   gating_cov_ = saved::fixed(s, "gating_covariance", kDim, kDim, Eigen::Matrix3d::Zero(), "point");
   for (const PointObservation& r : rays_)
     if (r.planar()) throw std::invalid_argument("point: a saved ray has 2 rows");
-  if (mdim_ != kTentativeDim && !rays_.empty()) throw std::invalid_argument("point: an initialised point keeps no rays");
+  if (mdim_ != kTentativeDim && !rays_.empty())
+    throw std::invalid_argument("point: an initialised point keeps no rays");
   if (mdim_ == kFullDim && !observations_.empty())
     throw std::invalid_argument("point: a point at dimension 3 keeps no observations");
   for (const PointObservation& o : observations_)

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <numbers>
@@ -85,7 +86,8 @@ Eigen::Vector3d ref_measure(const Eigen::Vector3d& p, const Pose6& x_ms) {
 /// (x, y): closest approach in the horizontal plane.
 double ref_ray_height(const Eigen::Vector2d& xy, const Eigen::Vector3d& v, const Pose6& x_ms) {
   const Eigen::Vector3d u =
-      rotation(x_ms) * Eigen::Vector3d(std::cos(v[2]) * std::cos(v[1]), std::cos(v[2]) * std::sin(v[1]), std::sin(v[2]));
+      rotation(x_ms) *
+      Eigen::Vector3d(std::cos(v[2]) * std::cos(v[1]), std::cos(v[2]) * std::sin(v[1]), std::sin(v[2]));
   const Eigen::Vector2d u_h = u.head<2>();
   const double lambda = u_h.dot(xy - x_ms.head<2>()) / u_h.squaredNorm();
   return x_ms[2] + u.z() * lambda;
@@ -340,9 +342,10 @@ TEST(PlanarPoint, ElevationExtensionJacobiansMatchTheReference) {
     EXPECT_EQ(ext->sensor, 1);
     EXPECT_NEAR(f.coords()[2], ref_ray_height(xy, v, x_ms), 1e-9);
     EXPECT_EQ(f.coords().head<2>(), xy);
-    const auto z_of_xy = [&](const Eigen::VectorXd& w) { return Eigen::VectorXd::Constant(1, ref_ray_height(w, v, x_ms)); };
-    const auto z_of_pose = [&](const Eigen::VectorXd& p) { return Eigen::VectorXd::Constant(1, ref_ray_height(xy, v, Pose6(p))); };
-    const auto z_of_v = [&](const Eigen::VectorXd& w) { return Eigen::VectorXd::Constant(1, ref_ray_height(xy, w, x_ms)); };
+    const auto one = [](double z) { return Eigen::VectorXd::Constant(1, z); };
+    const auto z_of_xy = [&](const Eigen::VectorXd& w) { return one(ref_ray_height(w, v, x_ms)); };
+    const auto z_of_pose = [&](const Eigen::VectorXd& p) { return one(ref_ray_height(xy, v, Pose6(p))); };
+    const auto z_of_v = [&](const Eigen::VectorXd& w) { return one(ref_ray_height(xy, w, x_ms)); };
     ASSERT_EQ(ext->J_own.rows(), 1);
     ASSERT_EQ(ext->J_own.cols(), 2);
     EXPECT_LT((numeric(z_of_xy, xy) - ext->J_own).norm(), 1e-6 * (1.0 + ext->J_own.norm()));
@@ -476,8 +479,9 @@ TEST(PlanarPoint, ConformanceSamplesCoverEveryDimensionAndExtension) {
     }
   }
   EXPECT_TRUE(planar_at_2 && elevation_at_2);
-  for (int d : {0, 2, 3}) EXPECT_NE(std::find(reached_from_0.begin(), reached_from_0.end(), d), reached_from_0.end()) << d;
-  for (int d : {2, 3}) EXPECT_NE(std::find(reached_from_2.begin(), reached_from_2.end(), d), reached_from_2.end()) << d;
+  const auto reaches = [](const std::vector<int>& dims, int d) { return std::find(dims.begin(), dims.end(), d) != dims.end(); };
+  for (int d : {0, 2, 3}) EXPECT_TRUE(reaches(reached_from_0, d)) << d;
+  for (int d : {2, 3}) EXPECT_TRUE(reaches(reached_from_2, d)) << d;
 }
 
 }  // namespace
