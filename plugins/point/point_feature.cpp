@@ -16,7 +16,7 @@
 namespace mspace::point {
 namespace {
 
-constexpr int kDim = 3;  ///< full M-space dimension = size of x_f
+constexpr int kDim = kFullDim;  ///< full M-space dimension = size of x_f
 
 /// Shorter vectors (a predicted point, a measured bearing) have no direction.
 constexpr double kMinNorm = 1e-9;
@@ -38,14 +38,40 @@ double degrees_to_radians(double deg) { return deg * std::numbers::pi / 180.0; }
 /// Distance of a sensor-frame point from the sensor's z axis, √(x² + y²).
 double axis_distance(const Eigen::Vector3d& p) { return std::hypot(p.x(), p.y()); }
 
-/// A well-formed 3-vector measurement of `kind` with a 3×3 covariance.
-bool is_measurement_of(const Measurement& m, const char* kind) {
-  return m.kind == kind && m.v.size() == kDim && m.C_v.rows() == kDim && m.C_v.cols() == kDim &&
+/// A well-formed measurement of `kind`: a `size`-vector with a size × size covariance.
+bool is_measurement_of(const Measurement& m, const char* kind, int size = kDim) {
+  return m.kind == kind && m.v.size() == size && m.C_v.rows() == size && m.C_v.cols() == size &&
          m.v.allFinite() && m.C_v.allFinite();
 }
 
 /// A well-formed range/bearing/elevation measurement.
 bool is_point_measurement(const Measurement& m) { return is_measurement_of(m, kRangeBearingElevation); }
+
+/// A well-formed planar range/bearing measurement.
+bool is_planar_measurement(const Measurement& m) { return is_measurement_of(m, kRangeBearing, 2); }
+
+/// Either of the two: a measurement with a range.
+bool is_ranged_measurement(const Measurement& m) { return is_point_measurement(m) || is_planar_measurement(m); }
+
+/// The observation of a ranged measurement, a planar one padded with zeros.
+PointObservation observation_of(const Measurement& m, const SensorView& view) {
+  PointObservation o;
+  o.size = static_cast<int>(m.v.size());
+  o.v.setZero();
+  o.C_v.setZero();
+  o.v.head(o.size) = m.v;
+  o.C_v.topLeftCorner(o.size, o.size) = m.C_v;
+  o.view = view;
+  return o;
+}
+
+/// C_v of an observation without its padding.
+Eigen::MatrixXd covariance_of(const PointObservation& o) { return o.C_v.topLeftCorner(o.size, o.size); }
+
+/// The back-projection of a ranged observation from its own view.
+placement::Placement place_observation(const PointObservation& o) {
+  return o.planar() ? back_project_planar(o.v.head<2>(), o.view.x_ms) : back_project(o.v, o.view.x_ms);
+}
 
 /// A well-formed bearing: also a direction (v not ~0).
 bool is_bearing_measurement(const Measurement& m) {
@@ -62,6 +88,10 @@ bool is_usable_bearing(const Measurement& m) {
 bool is_placeable(const Eigen::Vector3d& v) {
   return v[0] > 0.0 && axis_distance(spherical_to_cartesian(v)) >= kMinAxisDistance;
 }
+
+/// The same for an observation (a planar one lies in the scan plane: its
+/// distance from the axis is its range).
+bool is_placeable(const PointObservation& o) { return o.planar() ? o.v[0] >= kMinAxisDistance : is_placeable(o.v); }
 
 /// Was `taken` the view of the current step and sensor?
 bool taken_at(const SensorView& taken, const SensorView& now) {
@@ -184,6 +214,57 @@ placement::Placement back_project(const Eigen::Vector3d& v, const Pose6& x_ms) {
   return placement::place(point_layout(), p, J_pv, x_ms);
 }
 
+placement::Placement back_project_planar(const Eigen::Vector2d& v, const Pose6& x_ms) {
+  const double r = v[0], cb = std::cos(v[1]), sb = std::sin(v[1]);
+  Eigen::Matrix<double, 3, 2> J_pv;  // columns ∂p/∂r, ∂p/∂b
+  J_pv << cb, -r * sb,  //
+      sb, r * cb,       //
+      0.0, 0.0;
+  return placement::place(point_layout(), Eigen::Vector3d(r * cb, r * sb, 0.0), J_pv, x_ms);
+}
+
+Eigen::Vector2d planar_range_bearing(const Eigen::Vector3d& p, Eigen::Matrix<double, 2, 3>* J) {
+  const double rho2 = p.x() * p.x() + p.y() * p.y();
+  const double rho = std::sqrt(rho2);
+  if (J != nullptr) {
+    *J << p.x() / rho, p.y() / rho, 0.0,  //
+        -p.y() / rho2, p.x() / rho2, 0.0;
+  }
+  return {rho, std::atan2(p.y(), p.x())};
+}
+
+std::optional<RayHeight> ray_height(const Eigen::Vector2d& xy, const Eigen::Vector3d& v, const Pose6& x_ms) {
+  // The unit direction s(b, e) in the sensor frame and ∂s/∂(r, b, e) (the
+  // range column is zero: the ray does not depend on it).
+  Eigen::Matrix3d J_sv;
+  const Eigen::Vector3d s = spherical_to_cartesian(Eigen::Vector3d(1.0, v[1], v[2]), &J_sv);
+  J_sv.col(0).setZero();
+  // u = R_ms s through the SDK placement of s as a point: x = R_ms s + t,
+  // so ∂u/∂x_ms = J_s − [I 0] and ∂u/∂v = J_v.
+  const placement::Placement ray = placement::place(point_layout(), s, J_sv, x_ms);
+  const Eigen::Vector3d t = x_ms.head<3>();
+  const Eigen::Vector3d u = ray.x_f - t;
+  Eigen::Matrix<double, 3, 6> J_us = ray.J_s;
+  J_us.leftCols<3>() -= Eigen::Matrix3d::Identity();
+  const Eigen::Vector2d u_h = u.head<2>(), g = xy - t.head<2>();
+  const double q = u_h.squaredNorm(), k = u_h.dot(g);
+  constexpr double kMinHorizontal = 1e-3;  // |u_h| = sin of the ray's angle from the vertical
+  if (q < kMinHorizontal * kMinHorizontal || !(k > 0.0)) return std::nullopt;
+  const double lambda = k / q;
+  RayHeight h;
+  h.z = t.z() + u.z() * lambda;
+  // z = t_z + u_z (u_hᵀ g)/(u_hᵀ u_h), g = (x, y) − t_h.
+  Eigen::RowVector3d dz_du;
+  dz_du.head<2>() = u.z() * (g.transpose() / q - 2.0 * k * u_h.transpose() / (q * q));
+  dz_du[2] = lambda;
+  h.J_xy = u.z() * u_h.transpose() / q;
+  h.J_s = dz_du * J_us;
+  h.J_s.head<2>() -= h.J_xy;  // through g = (x, y) − t_h
+  h.J_s[2] += 1.0;            // t_z
+  h.J_v = dz_du * ray.J_v;
+  return h;
+}
+
 // ---------------------------------------------------------------- bearing geometry
 
 TangentBasis tangent_basis(const Eigen::Vector3d& n) {
@@ -276,11 +357,9 @@ std::optional<Triangulation> triangulate(const std::vector<Ray>& rays, const std
 
 // ---------------------------------------------------------------- PointFeature
 
-PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& v,
-                           const Eigen::Matrix3d& C_v, const SensorView& view)
-    : config_(config) {
-  mdim_ = 0;
-  place_at(v, C_v, view);
+PointFeature::PointFeature(const PointConfig& config, const PointObservation& first) : config_(config) {
+  mdim_ = kTentativeDim;
+  place_at(first);
 }
 
 PointFeature::PointFeature(const PointConfig& config, const Measurement& bearing, const SensorView& view)
@@ -297,27 +376,43 @@ PointFeature::PointFeature(const PointConfig& config, const Eigen::Vector3d& x_f
 
 namespace {
 
-constexpr int kSaveVersion = 1;
-constexpr int kObservationRecord = 3 + 9 + saved::kViewSize;
+/// Version 2 added the size of v to each record (planar observations).
+constexpr int kSaveVersion = 2;
+constexpr int kVersion1Record = 3 + 9 + saved::kViewSize;
+constexpr int kObservationRecord = 1 + kVersion1Record;
 
 Eigen::MatrixXd save_observations(const std::deque<PointObservation>& list) {
   Eigen::MatrixXd out(kObservationRecord, static_cast<Eigen::Index>(list.size()));
   for (Eigen::Index i = 0; i < out.cols(); ++i) {
     const PointObservation& o = list[static_cast<std::size_t>(i)];
     auto col = out.col(i);
-    col.head<3>() = o.v;
-    saved::put_matrix(col, 3, o.C_v);
-    saved::put_view(col, 12, o.view);
+    col[0] = o.size;
+    col.segment<3>(1) = o.v;
+    saved::put_matrix(col, 4, o.C_v);
+    saved::put_view(col, 13, o.view);
   }
   return out;
 }
 
 std::deque<PointObservation> restore_observations(const SavedFeature& s, const char* name) {
-  const Eigen::MatrixXd a = saved::records(s, name, kObservationRecord, "point");
+  const bool v1 = s.version == 1;
+  const Eigen::MatrixXd a = saved::records(s, name, v1 ? kVersion1Record : kObservationRecord, "point");
+  const int at = v1 ? 0 : 1;  // version 1: no size row, every observation 3 rows
   std::deque<PointObservation> out;
   for (Eigen::Index i = 0; i < a.cols(); ++i) {
     const Eigen::VectorXd col = a.col(i);
-    out.push_back({col.head<3>(), saved::get_matrix(col, 3, 3, 3), saved::get_view(col, 12)});
+    PointObservation o;
+    o.size = v1 ? 3 : static_cast<int>(col[0]);
+    if (!v1 && col[0] != 2.0 && col[0] != 3.0)
+      throw std::invalid_argument(std::string("point: saved array '") + name + "' has a record of size " +
+                                  std::to_string(col[0]) + " (2 or 3 expected)");
+    o.v = col.segment<3>(at);
+    o.C_v = saved::get_matrix(col, at + 3, 3, 3);
+    o.view = saved::get_view(col, at + 12);
+    if (o.planar() && (o.v[2] != 0.0 || o.C_v.row(2).any() || o.C_v.col(2).any()))
+      throw std::invalid_argument(std::string("point: saved array '") + name +
+                                  "' has a planar record with a third row");
+    out.push_back(o);
   }
   return out;
 }
@@ -325,47 +420,78 @@ std::deque<PointObservation> restore_observations(const SavedFeature& s, const c
 }  // namespace
 
 PointFeature::PointFeature(const PointConfig& config, const SavedFeature& s) : config_(config) {
-  saved::expect_layout(s, kSaveVersion, {"observations", "rays", "gating_covariance"}, "point");
-  if (s.coords.size() != kDim || !s.coords.allFinite() || (s.mspace_dim != 0 && s.mspace_dim != kDim) ||
-      s.extra.size() != 0) {
-    throw std::invalid_argument("point: restore needs 3 finite coordinates, dimension 0 or 3 and no extra state (got " +
-                                std::to_string(s.coords.size()) + " coordinates, dimension " +
-                                std::to_string(s.mspace_dim) + ")");
+  // Version 1 (before planar points) is read too: the same arrays without the size row.
+  saved::expect_layout(s, s.version == 1 ? 1 : kSaveVersion, {"observations", "rays", "gating_covariance"}, "point");
+  const bool known_dim = s.mspace_dim == kTentativeDim || s.mspace_dim == kPlanarDim || s.mspace_dim == kFullDim;
+  if (s.coords.size() != kDim || !s.coords.allFinite() || !known_dim || s.extra.size() != 0) {
+    throw std::invalid_argument(
+        "point: restore needs 3 finite coordinates, dimension 0, 2 or 3 and no extra state (got " +
+        std::to_string(s.coords.size()) + " coordinates, dimension " + std::to_string(s.mspace_dim) + ")");
   }
   x_ = s.coords;
   mdim_ = s.mspace_dim;
   observations_ = restore_observations(s, "observations");
   rays_ = restore_observations(s, "rays");
   gating_cov_ = saved::fixed(s, "gating_covariance", kDim, kDim, Eigen::Matrix3d::Zero(), "point");
-  if (mdim_ != 0 && (!observations_.empty() || !rays_.empty()))
-    throw std::invalid_argument("point: an initialised point keeps no observations");
+  for (const PointObservation& r : rays_)
+    if (r.planar()) throw std::invalid_argument("point: a saved ray has 2 rows");
+  if (mdim_ != kTentativeDim && !rays_.empty())
+    throw std::invalid_argument("point: an initialised point keeps no rays");
+  if (mdim_ == kFullDim && !observations_.empty())
+    throw std::invalid_argument("point: a point at dimension 3 keeps no observations");
+  for (const PointObservation& o : observations_)
+    if (mdim_ == kPlanarDim && o.planar())
+      throw std::invalid_argument("point: a point at dimension 2 keeps only observations with an elevation");
 }
 
 SavedFeature PointFeature::save() const {
   SavedFeature s{x_, mdim_, {}, {}, kSaveVersion};
   if (!observations_.empty()) s.put("observations", save_observations(observations_));
   if (!rays_.empty()) s.put("rays", save_observations(rays_));
-  if (mdim_ == 0) s.put("gating_covariance", gating_cov_);
+  if (mdim_ == kTentativeDim) s.put("gating_covariance", gating_cov_);
   return s;
 }
 
 const CoordLayout& PointFeature::layout() const { return point_layout(); }
 
-// Table II: the M-space of a point is the point itself, B = I. A tentative
-// point has no M-space: B is 0×3 and B̃ 3×0, so B B̃ = I₀ (eq. 12) holds too.
+// Table II: the M-space of a point is the point itself, B = I. A planar point
+// has the first two rows of it, B = [I₂ 0] and B̃ = Bᵀ (z outside the M-space).
+// A tentative point has no M-space: B is 0×3 and B̃ 3×0, so B B̃ = I₀ (eq. 12)
+// holds at every dimension.
 Eigen::MatrixXd PointFeature::B() const { return Eigen::MatrixXd::Identity(mdim_, kDim); }
 
 Eigen::MatrixXd PointFeature::B_dual() const { return Eigen::MatrixXd::Identity(kDim, mdim_); }
 
 // eq. 16. Range/bearing/elevation: η(x_o, v) = h(x_o) − v, so J_ηo = ∂h/∂x_o
-// and J_ηv = −I. Bearing: see bearing_innovation().
+// and J_ηv = −I. Planar range/bearing (and the planar part of a
+// range/bearing/elevation at dim 2): the same with the 2-row h of
+// planar_range_bearing. Bearing: see bearing_innovation().
 bool PointFeature::innovation(const Eigen::VectorXd& x_o, const Measurement& m,
                               Innovation& out) const {
   if (x_o.size() != kDim) return false;
   const Eigen::Vector3d p = x_o;
-  if (is_bearing_measurement(m)) return bearing_innovation(p, m.v, out);
-  if (!is_point_measurement(m)) return false;
+  if (is_bearing_measurement(m)) return mdim_ != kPlanarDim && bearing_innovation(p, m.v, out);
+  const bool planar = is_planar_measurement(m);
+  if (!planar && !is_point_measurement(m)) return false;
   if (axis_distance(p) < kMinAxisDistance) return false;
+  if (planar || mdim_ == kPlanarDim) {
+    Eigen::Matrix<double, 2, 3> J_ho;
+    const Eigen::Vector2d h = planar_range_bearing(p, &J_ho);
+    if (planar) {
+      out.eta = h - m.v;
+      out.J_eta_v = -Eigen::MatrixXd::Identity(2, 2);
+    } else {
+      // The planar part of (r, b, e): horizontal range r cos e and bearing b.
+      const double r = m.v[0], b = m.v[1], ce = std::cos(m.v[2]), se = std::sin(m.v[2]);
+      out.eta = h - Eigen::Vector2d(r * ce, b);
+      out.J_eta_v.resize(2, 3);
+      out.J_eta_v << -ce, 0.0, r * se,  //
+          0.0, -1.0, 0.0;
+    }
+    out.eta[1] = wrap_angle(out.eta[1]);
+    out.J_eta_o = J_ho;
+    return true;
+  }
   Eigen::Matrix3d J_ho;
   const Eigen::Vector3d h = cartesian_to_spherical(p, &J_ho);
   Eigen::Vector3d eta = h - m.v;
@@ -378,18 +504,18 @@ bool PointFeature::innovation(const Eigen::VectorXd& x_o, const Measurement& m,
 }
 
 Eigen::MatrixXd PointFeature::gating_covariance() const {
-  if (mdim_ != 0) return {};
+  if (mdim_ != kTentativeDim) return {};
   return gating_cov_;
 }
 
 std::vector<Ray> PointFeature::rays() const { return rays_of(rays_); }
 
-void PointFeature::place_at(const Eigen::Vector3d& v, const Eigen::Matrix3d& C_v,
-                            const SensorView& view) {
-  const placement::Placement bp = back_project(v, view.x_ms);
+void PointFeature::place_at(const PointObservation& o) {
+  const placement::Placement bp = place_observation(o);
   x_ = bp.x_f;
-  // First-order covariance of x_f = g(v, x_ms) with v and x_ms independent.
-  gating_cov_ = placement::covariance(bp, C_v, view.C_ms);
+  // First-order covariance of x_f = g(v, x_ms) with v and x_ms independent
+  // (for a planar observation z varies only with the sensor pose).
+  gating_cov_ = placement::covariance(bp, covariance_of(o), o.view.C_ms);
 }
 
 void PointFeature::place_on_rays(const std::vector<Ray>& rays, const SensorView& newest) {
@@ -421,29 +547,42 @@ void PointFeature::store_ray(const PointObservation& observation) {
 }
 
 void PointFeature::add_dense_information(const Measurement& m, const SensorView& view) {
-  if (is_point_measurement(m)) {
-    if (mdim_ != 0) return;  // initialised: the estimator holds all there is to know
-    observations_.push_back({m.v, m.C_v, view});
+  if (is_ranged_measurement(m)) {
+    if (mdim_ == kFullDim) return;  // the estimator holds all there is to know
+    const PointObservation o = observation_of(m, view);
+    if (mdim_ == kPlanarDim) {
+      // The evidence for 2 → 3 is the newest elevation; a planar
+      // measurement adds nothing the estimator does not hold.
+      if (!o.planar()) observations_.assign(1, o);
+      return;
+    }
+    observations_.push_back(o);
     while (static_cast<int>(observations_.size()) > config_.max_dense) observations_.pop_front();
-    place_at(m.v, m.C_v, view);
+    place_at(o);
     return;
   }
   if (!is_usable_bearing(m)) {
     throw std::invalid_argument("point: add_dense_information got a measurement of kind '" + m.kind +
                                 "' (expected '" + kRangeBearingElevation + "' or '" + kBearing3d +
-                                "' with a 3-vector and a 3×3 covariance, of rank 2 across a bearing)");
+                                "' with a 3-vector and a 3×3 covariance, of rank 2 across a bearing, or '" +
+                                kRangeBearing + "' with a 2-vector and a 2×2 covariance)");
   }
-  if (mdim_ != 0) return;
+  if (mdim_ != kTentativeDim) return;
   store_ray({m.v, m.C_v, view});
   place_on_rays(rays_of(rays_), view);
 }
 
 std::optional<Extension> PointFeature::extend(const SensorView& last_view) {
-  if (mdim_ != 0) return std::nullopt;
-  std::optional<Extension> ext = extend_from_range_bearing(last_view);
-  if (!ext) ext = extend_from_rays(last_view);
+  if (mdim_ == kFullDim) return std::nullopt;
+  std::optional<Extension> ext;
+  if (mdim_ == kPlanarDim) {
+    ext = extend_elevation(last_view);
+  } else {
+    ext = extend_from_range_bearing(last_view);
+    if (!ext) ext = extend_from_rays(last_view);
+  }
   if (ext) {
-    mdim_ = kDim;
+    mdim_ += ext->new_dims;
     observations_.clear();
     rays_.clear();
   }
@@ -453,14 +592,42 @@ std::optional<Extension> PointFeature::extend(const SensorView& last_view) {
 std::optional<Extension> PointFeature::extend_from_range_bearing(const SensorView& last_view) {
   if (num_observations() < config_.min_observations) return std::nullopt;
   const PointObservation& latest = observations_.back();
-  if (!taken_at(latest.view, last_view) || latest.v[0] < config_.min_range_for_init || !is_placeable(latest.v)) {
+  if (!taken_at(latest.view, last_view) || latest.v[0] < config_.min_range_for_init || !is_placeable(latest)) {
     return std::nullopt;
   }
-  // Standard EKF landmark initialisation: δx_f = J_s δx_ms + J_v δv, and with
-  // B = I the new M-space perturbations are δx_f itself.
-  const placement::Placement bp = back_project(latest.v, latest.view.x_ms);
+  // Standard EKF landmark initialisation: δx_f = J_s δx_ms + J_v δv, and the
+  // new M-space perturbations are B δx_f: all of it with an elevation
+  // (B = I), its x and y without (B = [I₂ 0], z stays in the scan plane).
+  const placement::Placement bp = place_observation(latest);
   x_ = bp.x_f;
-  return placement::full_extension(bp, latest.C_v, latest.view.sensor);
+  Extension ext = placement::full_extension(bp, covariance_of(latest), latest.view.sensor);
+  if (latest.planar()) {
+    ext.new_dims = kPlanarDim;
+    ext.J_sensor = ext.J_sensor.topRows(kPlanarDim).eval();
+    ext.J_own = Eigen::MatrixXd(kPlanarDim, 0);
+    ext.C_new = ext.C_new.topLeftCorner(kPlanarDim, kPlanarDim).eval();
+  }
+  return ext;
+}
+
+// 2 → 3: z from the newest elevation (ray_height and the file comment).
+std::optional<Extension> PointFeature::extend_elevation(const SensorView& last_view) {
+  if (observations_.empty()) return std::nullopt;
+  const PointObservation& o = observations_.back();
+  if (o.planar() || !taken_at(o.view, last_view)) return std::nullopt;
+  const std::optional<RayHeight> h = ray_height(x_.head<2>(), o.v, o.view.x_ms);
+  if (!h) return std::nullopt;
+  Extension ext;
+  ext.new_dims = 1;
+  ext.sensor = o.view.sensor;
+  ext.J_sensor = h->J_s;
+  ext.J_own = h->J_xy;  // δx_p,old = (δx, δy): B̃ = [I₂ 0]ᵀ
+  const Eigen::RowVector3d J_v_C = h->J_v * o.C_v;
+  const double variance = J_v_C.dot(h->J_v);  // J_v C_v J_vᵀ
+  if (!(variance > 0.0)) return std::nullopt;
+  ext.C_new = Eigen::MatrixXd::Constant(1, 1, variance);
+  x_[2] = h->z;
+  return ext;
 }
 
 std::optional<Extension> PointFeature::extend_from_rays(const SensorView& last_view) {
@@ -534,36 +701,52 @@ PointType::PointType(const PluginArgs& args) {
 
 const CoordLayout& PointType::layout() const { return point_layout(); }
 
-std::vector<std::string> PointType::measurement_kinds() const { return {kRangeBearingElevation, kBearing3d}; }
+std::vector<std::string> PointType::measurement_kinds() const {
+  return {kRangeBearingElevation, kRangeBearing, kBearing3d};
+}
 
 std::unique_ptr<Feature> PointType::create(const Measurement& m, const SensorView& view) {
   if (is_usable_bearing(m)) return std::make_unique<PointFeature>(config_, m, view);
-  if (!is_point_measurement(m)) return nullptr;
-  const Eigen::Vector3d v = m.v;
-  if (!is_placeable(v)) return nullptr;
-  return std::make_unique<PointFeature>(config_, v, m.C_v, view);
+  if (!is_ranged_measurement(m)) return nullptr;
+  const PointObservation o = observation_of(m, view);
+  if (!is_placeable(o)) return nullptr;
+  return std::make_unique<PointFeature>(config_, o);
 }
 
 // ---------------------------------------------------------------- conformance
 
 std::optional<FeatureSample> PointType::sample(int dim, std::uint64_t seed) const {
-  if (dim != 0 && dim != kDim) return std::nullopt;
-  return seed % 2 == 0 ? range_bearing_sample(dim, seed) : bearing_sample(dim, seed);
+  switch (dim) {
+    case kTentativeDim:
+    case kFullDim:
+      // 0: extends to 3, never (one repeated bearing has no parallax), to 2.
+      return seed % 3 == 0 ? range_bearing_sample(dim, seed, false)
+             : seed % 3 == 1 ? bearing_sample(dim, seed)
+                             : range_bearing_sample(dim, seed, true);
+    case kPlanarDim:
+      // Planar measurements, or an elevation that extends the point to 3.
+      return range_bearing_sample(dim, seed, seed % 2 == 0);
+    default:
+      return std::nullopt;
+  }
 }
 
-std::optional<FeatureSample> PointType::range_bearing_sample(int dim, std::uint64_t seed) const {
+std::optional<FeatureSample> PointType::range_bearing_sample(int dim, std::uint64_t seed, bool planar) const {
   std::mt19937_64 rng(seed);
   FeatureSample s;
   s.x_ms = sample_pose(rng);
   const double r = draw(rng, 2, 8), b = draw(rng, -1.5, 1.5), e = draw(rng, -0.4, 0.4);
-  const Eigen::Vector3d v(r, b, e);
-  s.measurement.kind = kRangeBearingElevation;
-  s.measurement.v = v;
-  s.measurement.C_v = Eigen::Vector3d(0.05 * 0.05, 0.01 * 0.01, 0.02 * 0.02).asDiagonal();
-  if (dim == 0) {
-    s.feature = std::make_unique<PointFeature>(config_, v, s.measurement.C_v, sample_view(s.x_ms));
+  // A planar sensor sees the point in its scan plane (a point elsewhere is
+  // held at its own height, which a tilted sensor's planar innovation sees).
+  const Eigen::Vector3d v(r, b, planar ? 0.0 : e);
+  const Eigen::Vector3d sigma(0.05, 0.01, 0.02);  // the default range_bearing extractor's
+  s.measurement.kind = planar ? kRangeBearing : kRangeBearingElevation;
+  s.measurement.v = v.head(planar ? 2 : 3);
+  s.measurement.C_v = sigma.head(planar ? 2 : 3).array().square().matrix().asDiagonal();
+  if (dim == kTentativeDim) {
+    s.feature = std::make_unique<PointFeature>(config_, observation_of(s.measurement, sample_view(s.x_ms)));
   } else {
-    s.feature = std::make_unique<PointFeature>(config_, back_project(v, s.x_ms).x_f, kDim);
+    s.feature = std::make_unique<PointFeature>(config_, back_project(v, s.x_ms).x_f, dim);
   }
   return s;
 }

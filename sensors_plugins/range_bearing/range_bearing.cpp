@@ -63,9 +63,8 @@ std::vector<ParamSpec> RangeBearingExtractor::param_specs() {
       param_double("bearing_sigma_deg", 1.0, "bearing noise standard deviation (deg), > 0", 0.0,
                    180.0),
       param_double("elevation_sigma_deg", 2.0,
-                   "elevation noise standard deviation (deg), > 0; for 2-column readings "
-                   "(planar sensor) the vertical beam width: elevation is taken as 0 with this "
-                   "standard deviation",
+                   "elevation noise standard deviation (deg), > 0; used for 3-column readings only "
+                   "(2-column readings come from a planar sensor and measure no elevation)",
                    0.0, 90.0),
       param_double("min_range", 0.1, "readings closer than this are dropped (m)", 0.0),
       param_double("max_range", 30.0, "readings farther than this are dropped (m)", 0.0),
@@ -88,10 +87,11 @@ RangeBearingExtractor::RangeBearingExtractor(const PluginArgs& args) : log_(&arg
 
 void RangeBearingExtractor::extract(const SensorReading& reading, std::vector<Measurement>& out) {
   check_columns(reading);
+  const bool planar = reading.values.cols() == 2;
+  const Eigen::Index size = planar ? 2 : 3;
   const Eigen::Vector3d variances(config_.range_sigma * config_.range_sigma,
                                   config_.bearing_sigma * config_.bearing_sigma,
                                   config_.elevation_sigma * config_.elevation_sigma);
-  const bool planar = reading.values.cols() == 2;
   int dropped = 0;
   for (Eigen::Index row = 0; row < reading.values.rows(); ++row) {
     check_finite(reading, row);
@@ -101,11 +101,10 @@ void RangeBearingExtractor::extract(const SensorReading& reading, std::vector<Me
       continue;
     }
     Measurement m;
-    m.kind = kMeasurementKind;
-    // A planar sensor sees the object in its scan plane: elevation 0, with
-    // the beam width as its standard deviation (see the header).
-    m.v = Eigen::Vector3d(range, reading.values(row, 1), planar ? 0.0 : reading.values(row, 2));
-    m.C_v = variances.asDiagonal();
+    // A planar sensor measures (r, b) and no elevation (see the header).
+    m.kind = planar ? kPlanarMeasurementKind : kMeasurementKind;
+    m.v = reading.values.row(row).transpose();
+    m.C_v = variances.head(size).asDiagonal();
     out.push_back(std::move(m));
   }
   if (dropped > 0) {

@@ -3,19 +3,17 @@
 //
 // Each row of a SensorReading's `values` is one detected object, in metres and
 // radians in the sensor frame:
-//   2 columns: (r, b)     — a planar sensor (e.g. a laser scanner),
-//   3 columns: (r, b, e)  — a 3-D sensor.
-// Every row becomes a Measurement of kind "range_bearing_elevation" with
-// v = (r, b, e) and C_v = diag(σr², σb², σe²).
+//   2 columns: (r, b)     — a planar sensor (e.g. a laser scanner): a
+//                           Measurement of kind "range_bearing" with
+//                           v = (r, b) and C_v = diag(σr², σb²);
+//   3 columns: (r, b, e)  — a 3-D sensor: kind "range_bearing_elevation" with
+//                           v = (r, b, e) and C_v = diag(σr², σb², σe²).
 //
-// Planar sensors. A 2-D sensor cannot measure elevation, but it does not see
-// objects far from its scan plane either: its vertical beam width limits
-// what it detects to elevations within about ± that angle. So a 2-column row
-// is turned into a 3-D measurement with e = 0 and σe = `elevation_sigma_deg`,
-// the beam width. Point features built from it then sit in the scan plane
-// with an honest vertical uncertainty, and the same point feature type
-// serves 2-D and 3-D sensors. For 3-column rows `elevation_sigma_deg` is the
-// ordinary elevation noise.
+// Planar sensors. A 2-D sensor measures no elevation, and its measurement
+// says so: it has two rows. A point feature fed only planar measurements
+// stays in its M-space of dimension 2 (x, y; the height outside it), and
+// extends to 3 if a 3-D sensor ever measures its elevation.
+// `elevation_sigma_deg` is used for 3-column rows only.
 //
 // Rows with a range outside [min_range, max_range] are dropped. A reading
 // with non-finite numbers or a column count other than 2 or 3 is an error
@@ -30,14 +28,15 @@
 
 namespace mspace::range_bearing {
 
-/// The measurement kind this extractor produces.
+/// The measurement kinds this extractor produces: 3-column rows, 2-column rows.
 inline constexpr const char* kMeasurementKind = "range_bearing_elevation";
+inline constexpr const char* kPlanarMeasurementKind = "range_bearing";
 
 /// The extractor's settings, with angles already converted to radians.
 struct RangeBearingConfig {
   double range_sigma = 0.05;     ///< σr (m)
   double bearing_sigma = 0.0;    ///< σb (rad)
-  double elevation_sigma = 0.0;  ///< σe (rad); the vertical beam width for 2-column rows
+  double elevation_sigma = 0.0;  ///< σe (rad), for 3-column rows
   double min_range = 0.0;        ///< shorter readings are dropped (m)
   double max_range = 0.0;        ///< longer readings are dropped (m)
 };

@@ -12,8 +12,8 @@ mspace::PluginDescriptor describe() {
   d.name = "range_bearing";
   d.kind = mspace::PluginKind::Extractor;
   d.description =
-      "Rows of (range, bearing[, elevation]) → 'range_bearing_elevation' point measurements; "
-      "2-column rows come from a planar sensor (elevation 0 ± the vertical beam width)";
+      "Rows of (range, bearing, elevation) → 'range_bearing_elevation' point measurements; "
+      "2-column rows (a planar sensor) → 'range_bearing' (no elevation)";
   d.params = mspace::range_bearing::RangeBearingExtractor::param_specs();
   d.factory = [](const mspace::PluginArgs& args) -> std::unique_ptr<mspace::PluginObject> {
     return std::make_unique<mspace::range_bearing::RangeBearingExtractor>(args);

@@ -1,6 +1,7 @@
-// Whole runs of the data-set configurations, as `mspace run` runs them but
-// without writing outputs: the issues' run-time targets (Victoria Park < 3 s,
-// Intel < 2 s on the CI machine kind) are checked here, not in timed tests.
+// Whole runs of the data-set configurations and of the built-in simulated
+// world, as `mspace run` runs them but without writing outputs: the issues'
+// run-time targets (Victoria Park < 3 s, Intel < 2 s on the CI machine kind)
+// are checked here, not in timed tests.
 // Each iteration constructs the run (reading the data, laser odometry for
 // Intel) and steps it to the end; wall time is what counts (UseRealTime).
 #include <benchmark/benchmark.h>
@@ -47,6 +48,8 @@ void run_config(benchmark::State& state, const std::string& config_name, const f
 }
 
 void BM_VictoriaPark(benchmark::State& state) { run_config(state, "victoria_park.yaml", "victoria_park"); }
+// The built-in simulated world (no data needed): planar points, state 3 + 2N.
+void BM_SimPoints(benchmark::State& state) { run_config(state, "sim_points.yaml", "."); }
 void BM_IntelWalls(benchmark::State& state) {
   run_config(state, "intel_walls.yaml", "intel_lab/intel_910_scans.txt");
 }
@@ -55,4 +58,5 @@ void BM_IntelWalls(benchmark::State& state) {
 
 BENCHMARK(BM_VictoriaPark)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_IntelWalls)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+BENCHMARK(BM_SimPoints)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK_MAIN();

@@ -31,7 +31,10 @@ TEST(Conformance, PointPassesEveryCheck) {
   EXPECT_TRUE(r.passed());
   EXPECT_TRUE(passed(r, "feature.J_eta_o"));
   EXPECT_TRUE(passed(r, "feature.extension_J_sensor"));
+  // Only an extension from a dimension > 0 (the planar 2 → 3) has a J_own to check.
+  EXPECT_TRUE(passed(r, "feature.extension_J_own"));
   EXPECT_TRUE(passed(r, "feature.save_restore"));
+  EXPECT_TRUE(passed(r, "feature.save_restore_future"));
 }
 
 TEST(Conformance, WrongJacobianSignFailsTheJacobianChecks) {
@@ -46,16 +49,23 @@ TEST(Conformance, WrongJacobianSignFailsTheJacobianChecks) {
   EXPECT_TRUE(passed(r, "feature.J_eta_v"));
 }
 
-TEST(Conformance, NonDualBFailsEquation12Only) {
+// B̃ = 2·B_dual fails eq. 12 and, since the point's 2 → 3 extension gives
+// J_own with respect to δx_p,old (which B̃ maps to x_f), the extension's J_own
+// too: the doubled B̃ doubles the measured ∂z_new/∂δx_p,old. Nothing else.
+TEST(Conformance, NonDualBFailsEquation12AndTheExtensionThroughIt) {
   const conformance::Report r = check("broken_dual", MSPACE_CONFORMANCE_FIXTURE_DIR);
   EXPECT_FALSE(r.passed());
   const conformance::CheckResult* dual = r.find("feature.B_Bdual_identity");
   ASSERT_NE(dual, nullptr);
   EXPECT_FALSE(dual->passed);
   EXPECT_DOUBLE_EQ(dual->worst, 1.0);  // B·B̃ = 2·I
+  const conformance::CheckResult* own = r.find("feature.extension_J_own");
+  ASSERT_NE(own, nullptr);
+  EXPECT_FALSE(own->passed);
   EXPECT_TRUE(passed(r, "feature.J_eta_o"));
   EXPECT_TRUE(passed(r, "feature.J_eta_v"));
-  EXPECT_EQ(r.failures(), 1);
+  EXPECT_TRUE(passed(r, "feature.J_eta_xp"));  // J_ηo J_of B̃ agrees with apply_perturbation's B̃
+  EXPECT_EQ(r.failures(), 2);
 }
 
 TEST(Conformance, JunitListsEveryCheckAndFailure) {
@@ -63,7 +73,7 @@ TEST(Conformance, JunitListsEveryCheckAndFailure) {
   std::ostringstream xml;
   conformance::write_junit({r}, xml);
   EXPECT_NE(xml.str().find("<testsuite name=\"broken_dual\" tests=\"" + std::to_string(r.checks.size()) +
-                           "\" failures=\"1\""),
+                           "\" failures=\"2\""),
             std::string::npos);
   EXPECT_NE(xml.str().find("name=\"feature.B_Bdual_identity\"><failure"), std::string::npos);
 }

@@ -562,8 +562,8 @@ TEST(BearingGate, TentativePointAcceptsItsLampAndRejectsOneHalfAMetreAway) {
 
 TEST(BearingType, KindsParametersAndSamples) {
   PointType type(point_args());
-  ASSERT_EQ(type.measurement_kinds().size(), 2u);
-  EXPECT_EQ(type.measurement_kinds()[1], "bearing3d");
+  ASSERT_EQ(type.measurement_kinds().size(), 3u);
+  EXPECT_EQ(type.measurement_kinds()[2], "bearing3d");
   const Params defaults = Params::defaults(PointType::param_specs());
   EXPECT_EQ(defaults.get_int("min_rays"), 3);
   EXPECT_EQ(defaults.get_int("max_rays"), 20);
@@ -576,12 +576,15 @@ TEST(BearingType, KindsParametersAndSamples) {
   bad.params.set("max_rays", std::int64_t{4});
   EXPECT_THROW(PointType{bad}, std::invalid_argument);
 
-  // The conformance samples cover both kinds, at both dimensions, with η = 0.
-  for (int dim : {0, 3}) {
-    for (std::uint64_t seed : {1u, 2u}) {
+  // The conformance samples cover the three kinds at dims 0 and 3 (seed % 3)
+  // and both ranged kinds at dim 2 (seed % 2), with η = 0.
+  const char* kinds[] = {"range_bearing_elevation", "bearing3d", "range_bearing"};
+  for (int dim : {0, 2, 3}) {
+    for (std::uint64_t seed : {1u, 2u, 3u}) {
       const std::optional<FeatureSample> s = type.sample(dim, seed);
       ASSERT_TRUE(s.has_value());
-      EXPECT_EQ(s->measurement.kind, seed % 2 == 1 ? "bearing3d" : "range_bearing_elevation");
+      EXPECT_EQ(s->measurement.kind, dim == 2 ? (seed % 2 == 0 ? "range_bearing" : "range_bearing_elevation")
+                                              : kinds[seed % 3]);
       EXPECT_EQ(s->feature->mspace_dim(), dim);
       Innovation inn;
       ASSERT_TRUE(s->feature->innovation(to_sensor_frame(layout(), s->feature->coords(), s->x_ms), s->measurement, inn));

@@ -8,6 +8,7 @@
 #include <memory>
 #include <numbers>
 #include <random>
+#include <vector>
 
 #include "mspace/pose.hpp"
 #include "mspace/transform.hpp"
@@ -386,9 +387,11 @@ TEST(PointType, DescribesItselfAndValidatesParameters) {
   EXPECT_EQ(type.max_mspace_dim(), 3);
   EXPECT_EQ(type.layout().size(), 3);
   EXPECT_EQ(type.layout().kind(0), BlockKind::Point3D);
-  ASSERT_EQ(type.measurement_kinds().size(), 2u);
+  EXPECT_EQ(type.reachable_dims(), (std::vector<int>{0, 2, 3}));
+  ASSERT_EQ(type.measurement_kinds().size(), 3u);
   EXPECT_EQ(type.measurement_kinds()[0], "range_bearing_elevation");
-  EXPECT_EQ(type.measurement_kinds()[1], "bearing3d");
+  EXPECT_EQ(type.measurement_kinds()[1], "range_bearing");
+  EXPECT_EQ(type.measurement_kinds()[2], "bearing3d");
   const Params defaults = Params::defaults(PointType::param_specs());
   EXPECT_EQ(defaults.get_int("min_observations"), 3);
   EXPECT_THROW(PointType(point_args(5, 4)), std::invalid_argument);

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -50,7 +51,8 @@ std::string extract_error(RangeBearingExtractor& ex, const SensorReading& r) {
   return "";
 }
 
-TEST(RangeBearing, PlanarRowsGetZeroElevationWithTheBeamWidth) {
+// A planar sensor measures no elevation: its measurements have two rows.
+TEST(RangeBearing, PlanarRowsAreRangeBearingWithoutElevation) {
   RangeBearingExtractor ex(extractor_args());
   Eigen::MatrixXd values(4, 2);
   values << 5.0, 0.1,  //
@@ -60,11 +62,13 @@ TEST(RangeBearing, PlanarRowsGetZeroElevationWithTheBeamWidth) {
   std::vector<Measurement> out;
   ex.extract(reading(values), out);
   ASSERT_EQ(out.size(), 2u);
-  const Eigen::Matrix3d C = Eigen::Vector3d(0.05 * 0.05, kDeg * kDeg, 4 * kDeg * kDeg).asDiagonal();
-  EXPECT_EQ(out[0].kind, "range_bearing_elevation");
-  EXPECT_TRUE(out[0].v.isApprox(Eigen::Vector3d(5.0, 0.1, 0.0), 0.0));
+  const Eigen::Matrix2d C = Eigen::Vector2d(0.05 * 0.05, kDeg * kDeg).asDiagonal();
+  EXPECT_EQ(out[0].kind, "range_bearing");
+  ASSERT_EQ(out[0].v.size(), 2);
+  EXPECT_TRUE(out[0].v.isApprox(Eigen::Vector2d(5.0, 0.1), 0.0));
+  ASSERT_EQ(out[0].C_v.rows(), 2);
   EXPECT_TRUE(out[0].C_v.isApprox(C, 1e-15));
-  EXPECT_TRUE(out[1].v.isApprox(Eigen::Vector3d(30.0, -3.0, 0.0), 0.0));
+  EXPECT_TRUE(out[1].v.isApprox(Eigen::Vector2d(30.0, -3.0), 0.0));
   EXPECT_TRUE(out[1].C_v.isApprox(C, 1e-15));
 }
 
@@ -77,6 +81,7 @@ TEST(RangeBearing, ThreeColumnRowsKeepTheirElevation) {
   out.push_back(Measurement{});  // extract appends
   ex.extract(reading(values), out);
   ASSERT_EQ(out.size(), 3u);
+  EXPECT_EQ(out[1].kind, "range_bearing_elevation");
   EXPECT_TRUE(out[1].v.isApprox(Eigen::Vector3d(2.0, -0.5, 0.3), 0.0));
   EXPECT_TRUE(out[2].v.isApprox(Eigen::Vector3d(7.5, 1.0, -0.2), 0.0));
   EXPECT_NEAR(out[2].C_v(2, 2), 4 * kDeg * kDeg, 1e-18);
@@ -132,8 +137,20 @@ TEST(RangeBearing, RejectsInconsistentParameters) {
   EXPECT_THROW(RangeBearingExtractor{args}, std::invalid_argument);
 }
 
-TEST(RangeBearing, MeasurementsStartPointsThatPredictThemExactly) {
+/// The point feature type with its defaults (min_observations 3).
+point::PointType point_type() {
+  PluginArgs args;
+  args.params = Params::defaults(point::PointType::param_specs());
+  return point::PointType(args);
+}
+
+// A planar measurement starts a point in the scan plane that predicts it
+// exactly; the point enters the map at M-space dimension 2 (x, y), its height
+// outside the M-space. The planar sensor's missing elevation is not turned
+// into a vertical uncertainty: z varies only with the sensor pose (none here).
+TEST(RangeBearing, PlanarMeasurementsStartPointsOfDimensionTwo) {
   EXPECT_STREQ(kMeasurementKind, point::kRangeBearingElevation);
+  EXPECT_STREQ(kPlanarMeasurementKind, point::kRangeBearing);
   RangeBearingExtractor ex(extractor_args());
   Eigen::MatrixXd values(1, 2);
   values << 6.0, 0.7;
@@ -141,20 +158,59 @@ TEST(RangeBearing, MeasurementsStartPointsThatPredictThemExactly) {
   ex.extract(reading(values), out);
   ASSERT_EQ(out.size(), 1u);
 
-  PluginArgs args;
-  args.params = Params::defaults(point::PointType::param_specs());
-  point::PointType type(args);
+  point::PointType type = point_type();
   SensorView view;
   view.x_ms = make_pose(2.0, -1.0, 0.4, 1.0, 0.0, 0.0);
   view.C_ms = Mat6::Zero();
   auto f = type.create(out[0], view);
   ASSERT_NE(f, nullptr);
+  EXPECT_NEAR(f->coords()[2], 0.4, 1e-15);  // the height of the scan plane
   Innovation inn;
   ASSERT_TRUE(f->innovation(to_sensor_frame(f->layout(), f->coords(), view.x_ms), out[0], inn));
+  ASSERT_EQ(inn.eta.size(), 2);
   EXPECT_LT(inn.eta.norm(), 1e-12);
-  // The planar sensor's beam width shows up as vertical uncertainty: for a
-  // level sensor and e = 0, σz = r·σe = 6 m · 2°.
-  EXPECT_NEAR(f->gating_covariance()(2, 2), std::pow(6.0 * 2.0 * kDeg, 2), 1e-15);
+  EXPECT_EQ(f->gating_covariance()(2, 2), 0.0);
+  std::optional<Extension> ext;
+  for (int k = 0; k < 3 && !ext; ++k) {
+    view.t = k;
+    f->add_dense_information(out[0], view);
+    ext = f->extend(view);
+  }
+  ASSERT_TRUE(ext.has_value());
+  EXPECT_EQ(ext->new_dims, 2);
+  EXPECT_EQ(f->mspace_dim(), 2);
+  EXPECT_NEAR(f->coords()[2], 0.4, 1e-15);
+}
+
+// 3-column rows keep working as before: a point of dimension 3.
+TEST(RangeBearing, ElevationMeasurementsStartPointsOfDimensionThree) {
+  RangeBearingExtractor ex(extractor_args());
+  Eigen::MatrixXd values(1, 3);
+  values << 6.0, 0.7, 0.2;
+  std::vector<Measurement> out;
+  ex.extract(reading(values), out);
+  ASSERT_EQ(out.size(), 1u);
+  point::PointType type = point_type();
+  SensorView view;
+  view.x_ms = make_pose(2.0, -1.0, 0.4, 1.0, 0.0, 0.0);
+  auto f = type.create(out[0], view);
+  ASSERT_NE(f, nullptr);
+  Innovation inn;
+  ASSERT_TRUE(f->innovation(to_sensor_frame(f->layout(), f->coords(), view.x_ms), out[0], inn));
+  ASSERT_EQ(inn.eta.size(), 3);
+  EXPECT_LT(inn.eta.norm(), 1e-12);
+  // σz = r·σe = 6 m · 2° for a level sensor and e ≈ 0.2.
+  EXPECT_NEAR(f->gating_covariance()(2, 2), std::pow(6.0 * 2.0 * kDeg * std::cos(0.2), 2) +
+                                                std::pow(0.05 * std::sin(0.2), 2), 1e-12);
+  std::optional<Extension> ext;
+  for (int k = 0; k < 3 && !ext; ++k) {
+    view.t = k;
+    f->add_dense_information(out[0], view);
+    ext = f->extend(view);
+  }
+  ASSERT_TRUE(ext.has_value());
+  EXPECT_EQ(ext->new_dims, 3);
+  EXPECT_EQ(f->mspace_dim(), 3);
 }
 
 }  // namespace
