@@ -195,7 +195,7 @@ void write_clf(const Simulation& sim, const std::filesystem::path& file) {
       out << buf;
     } else {
       const double start = l.bearing(0, scan.index);
-      std::snprintf(buf, sizeof buf, "ROBOTLASER1 0 %.9f %.9f %.9f %g 0.01 0 %zu", start,
+      std::snprintf(buf, sizeof buf, "ROBOTLASER1 0 %.12f %.12f %.12f %g 0.01 0 %zu", start,
                     (l.beams - 1) * l.resolution_deg * kDeg, l.resolution_deg * kDeg, l.max_range,
                     scan.ranges.size());
       out << buf;
