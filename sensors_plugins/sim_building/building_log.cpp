@@ -171,9 +171,9 @@ void write_clf(const Simulation& sim, const std::filesystem::path& file) {
   std::size_t next_odom = 0, next_scan = 0;
   char buf[256];
   while (next_odom < sim.odom_samples.size() || next_scan < sim.scans.size()) {
-    const bool odom_first = next_scan >= sim.scans.size() ||
-                            (next_odom < sim.odom_samples.size() &&
-                             sim.odom_samples[next_odom] <= sim.scans[next_scan].sample);
+    const bool odom_first =
+        next_scan >= sim.scans.size() ||
+        (next_odom < sim.odom_samples.size() && sim.odom_samples[next_odom] <= sim.scans[next_scan].sample);
     if (odom_first) {
       const std::size_t k = sim.odom_samples[next_odom++];
       const Pose2& p = sim.odometry[k];
@@ -196,14 +196,12 @@ void write_clf(const Simulation& sim, const std::filesystem::path& file) {
     } else {
       const double start = l.bearing(0, scan.index);
       std::snprintf(buf, sizeof buf, "ROBOTLASER1 0 %.12f %.12f %.12f %g 0.01 0 %zu", start,
-                    (l.beams - 1) * l.resolution_deg * kDeg, l.resolution_deg * kDeg, l.max_range,
-                    scan.ranges.size());
+                    (l.beams - 1) * l.resolution_deg * kDeg, l.resolution_deg * kDeg, l.max_range, scan.ranges.size());
       out << buf;
       for (double r : scan.ranges) out << fmt(" %.3f", r);
       const RouteSample& s = sim.route.samples[scan.sample];
-      std::snprintf(buf, sizeof buf,
-                    " 0 %.6f %.6f %.6f %.6f %.6f %.6f %.3f %.3f 0.5 0.5 0 %.6f mspace-sim %.6f\n", laser[0],
-                    laser[1], laser[2], odo[0], odo[1], odo[2], s.v, s.w, t, t);
+      std::snprintf(buf, sizeof buf, " 0 %.6f %.6f %.6f %.6f %.6f %.6f %.3f %.3f 0.5 0.5 0 %.6f mspace-sim %.6f\n",
+                    laser[0], laser[1], laser[2], odo[0], odo[1], odo[2], s.v, s.w, t, t);
       out << buf;
     }
   }
@@ -220,8 +218,7 @@ void write_poses(const Simulation& sim, const std::filesystem::path& file, bool 
     std::sort(samples.begin(), samples.end());
     samples.erase(std::unique(samples.begin(), samples.end()), samples.end());
   }
-  for (std::size_t k : samples)
-    write_tum_line(out, sim.time(k), truth ? sim.route.samples[k].pose : sim.odometry[k]);
+  for (std::size_t k : samples) write_tum_line(out, sim.time(k), truth ? sim.route.samples[k].pose : sim.odometry[k]);
   close_checked(out, file);
 }
 
@@ -294,7 +291,8 @@ void write_png(const Simulation& sim, const std::filesystem::path& file) {
   };
   for (const Person& m : sim.plan.people) cv::line(img, px(m.a), px(m.b), cv::Scalar(180, 180, 255), 3);
   std::vector<cv::Point> route;
-  for (std::size_t k = 0; k < sim.route.samples.size(); k += 10) route.push_back(px(sim.route.samples[k].pose.head<2>()));
+  for (std::size_t k = 0; k < sim.route.samples.size(); k += 10)
+    route.push_back(px(sim.route.samples[k].pose.head<2>()));
   cv::polylines(img, route, false, cv::Scalar(230, 150, 60), 1, cv::LINE_AA);
   for (const Segment& s : sim.plan.walls) cv::line(img, px(s.a), px(s.b), cv::Scalar(0, 0, 0), 2);
   for (const Box& box : sim.plan.boxes)
@@ -302,8 +300,9 @@ void write_png(const Simulation& sim, const std::filesystem::path& file) {
   for (const Disc& d : sim.plan.pillars)
     cv::circle(img, px(d.centre), std::max(1, static_cast<int>(d.radius * scale)), cv::Scalar(90, 90, 90), -1);
   cv::circle(img, px(sim.route.samples.front().pose.head<2>()), 6, cv::Scalar(0, 160, 0), -1);
-  cv::putText(img, sim.plan.name + " world " + std::to_string(sim.settings.world_seed) + " seed " +
-                       std::to_string(sim.settings.seed) + ", route " + fmt("%.0f", sim.route.length) + " m",
+  cv::putText(img,
+              sim.plan.name + " world " + std::to_string(sim.settings.world_seed) + " seed " +
+                  std::to_string(sim.settings.seed) + ", route " + fmt("%.0f", sim.route.length) + " m",
               cv::Point(8, 20), cv::FONT_HERSHEY_SIMPLEX, 0.55, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   if (!cv::imwrite(file.string(), img)) throw std::runtime_error(file.string() + ": cannot write the picture");
 }
@@ -328,10 +327,11 @@ void write_readme(const Simulation& sim, const std::filesystem::path& file) {
       << s.route.max_speed << " m/s, arcs r " << s.route.arc_radius << " m at " << s.route.arc_speed
       << " m/s, turns in place ≤ " << s.route.turn_rate << " rad/s\n\n";
   out << "Wheel odometry: scale error " << s.odometry.scale_error << ", turn scale error "
-      << s.odometry.turn_scale_error << ", heading bias " << s.odometry.heading_bias_deg_per_m
-      << " deg/m, noise " << s.odometry.xy_noise << " m/sqrt(m), " << s.odometry.heading_noise_deg
-      << " deg/sqrt(m), " << s.odometry.turn_noise << " rad/sqrt(rad)\n  error at the end of the route: "
-      << fmt("%.2f", std::hypot(err[0], err[1])) << " m, " << fmt("%.1f", std::abs(err[2]) / kDeg) << " deg\n\n";
+      << s.odometry.turn_scale_error << ", heading bias " << s.odometry.heading_bias_deg_per_m << " deg/m, noise "
+      << s.odometry.xy_noise << " m/sqrt(m), " << s.odometry.heading_noise_deg << " deg/sqrt(m), "
+      << s.odometry.turn_noise
+      << " rad/sqrt(rad)\n  error at the end of the route: " << fmt("%.2f", std::hypot(err[0], err[1])) << " m, "
+      << fmt("%.1f", std::abs(err[2]) / kDeg) << " deg\n\n";
   out << "Laser:\n" << s.laser.describe() << "\n";
   out << "Log: " << sim.scans.size() << " scans, " << sim.odom_samples.size() << " ODOM lines, " << sim.gaps
       << " logging gaps, time stamps from " << fmt("%.3f", s.t0) << " s\n";
@@ -344,10 +344,9 @@ void write_readme(const Simulation& sim, const std::filesystem::path& file) {
       << "  sensors.laser.mount: [" << s.laser.mount_x << ", " << s.laser.mount_y << ", 0, " << s.laser.mount_theta_deg
       << ", 0, 0]\n";
   if (s.laser.format == "flaser")
-    out << "  source.flaser_fov_deg: " << s.laser.beams * s.laser.resolution_deg
-        << " (FLASER lines carry no angles)\n";
-  out << "  source.no_return_range: at most " << fmt("%.2f", s.laser.no_return - 0.05)
-      << " (the no-return code " << s.laser.no_return << " and the error codes just below it)\n";
+    out << "  source.flaser_fov_deg: " << s.laser.beams * s.laser.resolution_deg << " (FLASER lines carry no angles)\n";
+  out << "  source.no_return_range: at most " << fmt("%.2f", s.laser.no_return - 0.05) << " (the no-return code "
+      << s.laser.no_return << " and the error codes just below it)\n";
   close_checked(out, file);
 }
 
@@ -365,8 +364,8 @@ Simulation simulate(const GeneratorSettings& settings) {
   sim.route = drive(plan_waypoints(sim.plan, settings.seed, settings.route), settings.seed, settings.route);
   sim.odometry = wheel_odometry(sim.route.samples, settings.odometry, settings.seed);
 
-  const auto odom_every = static_cast<std::size_t>(std::max(1L, std::lround(settings.laser.odom_interval /
-                                                                            settings.route.dt)));
+  const auto odom_every =
+      static_cast<std::size_t>(std::max(1L, std::lround(settings.laser.odom_interval / settings.route.dt)));
   for (std::size_t k = 0; k < sim.route.samples.size(); k += odom_every) sim.odom_samples.push_back(k);
 
   SimRandom schedule(settings.seed, 0x31u), noise(settings.seed, 0x30u), relations(settings.seed, 0x32u);

@@ -35,7 +35,7 @@ namespace mspace::sim_building {
 struct GeneratorSettings {
   std::string plan = "ring";  ///< family name or index
   std::uint64_t world_seed = 1;
-  std::uint64_t seed = 1;     ///< route, odometry and laser noise
+  std::uint64_t seed = 1;  ///< route, odometry and laser noise
   PlanOptions plan_options;
   RouteOptions route;
   OdometryErrors odometry;
@@ -65,7 +65,7 @@ struct Simulation {
   std::vector<ScanRecord> scans;
   std::vector<RelationRecord> relations;
   std::size_t short_relations = 0, long_relations = 0;
-  std::size_t gaps = 0;                   ///< logging gaps drawn
+  std::size_t gaps = 0;  ///< logging gaps drawn
 
   double time(std::size_t sample) const { return settings.t0 + route.samples[sample].t; }
 };

@@ -64,8 +64,8 @@ class Builder {
   void add_rooms(double min_width, double max_width, double min_depth, double max_depth, int symmetry) {
     const std::size_t n_edges = symmetry == 4 ? 1 : plan_.edges.size();
     for (std::size_t e = 0; e < n_edges; ++e)
-      for (int side : {+1, -1}) add_rooms_along(static_cast<int>(e), side, min_width, max_width, min_depth,
-                                                max_depth, symmetry);
+      for (int side : {+1, -1})
+        add_rooms_along(static_cast<int>(e), side, min_width, max_width, min_depth, max_depth, symmetry);
   }
 
   /// Boxes and pillars in every room (each room's own draw; the symmetric plan
@@ -165,8 +165,8 @@ class Builder {
       room.door_inside = point(door + kDoorWidth / 2.0, near + side * 1.0);
       room.centre = point(pos + width / 2.0, (near + far) / 2.0);
       bool ok = clear(room.area);
-      for (int k = 1; ok && k < symmetry; ++k) ok = !rot90(room.area, k).overlaps(room.area, t - 0.05) &&
-                                                   clear(rot90(room.area, k));
+      for (int k = 1; ok && k < symmetry; ++k)
+        ok = !rot90(room.area, k).overlaps(room.area, t - 0.05) && clear(rot90(room.area, k));
       if (ok) {
         plan_.rooms.push_back(room);
         for (int k = 1; k < symmetry; ++k) {
@@ -199,8 +199,7 @@ class Builder {
           distance_to_segment(c, room.door_inside, room.centre) < r + 0.7 || (c - room.centre).norm() < r + 0.8)
         continue;
       bool free = true;
-      for (const Box& b : plan_.boxes)
-        free = free && (b.centre - c).norm() > r + std::hypot(b.hx, b.hy) + 0.3;
+      for (const Box& b : plan_.boxes) free = free && (b.centre - c).norm() > r + std::hypot(b.hx, b.hy) + 0.3;
       for (const Disc& p : plan_.pillars) free = free && (p.centre - c).norm() > r + p.radius + 0.3;
       if (!free) continue;
       put(c);
@@ -303,8 +302,7 @@ double FloorPlan::loop_length(std::size_t i) const {
   const std::vector<int>& loop = loops.at(i);
   double length = 0.0;
   for (std::size_t k = 0; k < loop.size(); ++k)
-    length += (nodes[static_cast<std::size_t>(loop[(k + 1) % loop.size()])] -
-               nodes[static_cast<std::size_t>(loop[k])])
+    length += (nodes[static_cast<std::size_t>(loop[(k + 1) % loop.size()])] - nodes[static_cast<std::size_t>(loop[k])])
                   .norm();
   return length;
 }
@@ -350,8 +348,7 @@ const std::vector<Family>& families() {
        [](Builder& b, SimRandom& r) {
          const double a = r.uniform(30.0, 45.0), h = r.uniform(25.0, 35.0);  // perimeter 110–160 m
          const double a2 = a * r.uniform(0.4, 0.6), h1 = h * r.uniform(0.4, 0.6);
-         b.add_node(0, 0), b.add_node(a, 0), b.add_node(a, h1), b.add_node(a2, h1), b.add_node(a2, h),
-             b.add_node(0, h);
+         b.add_node(0, 0), b.add_node(a, 0), b.add_node(a, h1), b.add_node(a2, h1), b.add_node(a2, h), b.add_node(0, h);
          for (int i = 0; i < 6; ++i) b.add_edge(i, (i + 1) % 6);
        },
        1},
@@ -400,8 +397,7 @@ std::size_t plan_index(const std::string& name_or_index) {
   for (std::size_t i = 0; i < names.size(); ++i)
     if (names[i] == name_or_index || std::to_string(i) == name_or_index) return i;
   std::string choices;
-  for (std::size_t i = 0; i < names.size(); ++i)
-    choices += (i ? ", " : "") + std::to_string(i) + " " + names[i];
+  for (std::size_t i = 0; i < names.size(); ++i) choices += (i ? ", " : "") + std::to_string(i) + " " + names[i];
   throw std::invalid_argument("unknown plan '" + name_or_index + "' (choices: " + choices + ")");
 }
 

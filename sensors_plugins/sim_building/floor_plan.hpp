@@ -55,8 +55,8 @@ struct Rect {
 /// A room off a corridor edge with its door.
 struct Room {
   Rect area;
-  Rect door;                      ///< the opening through the wall
-  int edge = -1;                  ///< corridor edge the door opens onto
+  Rect door;                         ///< the opening through the wall
+  int edge = -1;                     ///< corridor edge the door opens onto
   Vec2 door_outside = Vec2::Zero();  ///< on the corridor's centre line, in front of the door
   Vec2 door_inside = Vec2::Zero();   ///< 1 m into the room, behind the door
   Vec2 centre = Vec2::Zero();
@@ -81,7 +81,7 @@ struct Person {
 };
 
 struct FloorPlan {
-  std::string name;             ///< family name (plan_names())
+  std::string name;  ///< family name (plan_names())
   std::uint64_t world_seed = 0;
   bool symmetric = false;       ///< deliberately ambiguous plan
   double corridor_width = 2.0;  ///< m
@@ -98,7 +98,7 @@ struct FloorPlan {
   std::vector<Disc> pillars;
   std::vector<Person> people;
 
-  std::vector<Segment> walls;   ///< free/solid boundary, merged (after build())
+  std::vector<Segment> walls;  ///< free/solid boundary, merged (after build())
 
   /// Length of loop i along the corridor centre lines (m).
   double loop_length(std::size_t i) const;
@@ -116,8 +116,8 @@ const std::vector<std::string>& plan_names();
 std::size_t plan_index(const std::string& name_or_index);
 
 struct PlanOptions {
-  int people = -1;       ///< moving people; −1: the family's default (2, none in `symmetric`)
-  bool clutter = true;   ///< boxes and pillars in rooms
+  int people = -1;      ///< moving people; −1: the family's default (2, none in `symmetric`)
+  bool clutter = true;  ///< boxes and pillars in rooms
 };
 
 /// The plan of family `family` (plan_index) for world_seed. Deterministic.

@@ -39,42 +39,49 @@ struct Preset {
 
 const std::vector<Preset>& presets() {
   static const std::vector<Preset> list = {
-      {"plain", "FLASER, 180 beams of 1° from −90° (the Intel data set's layout), 50 m, no return 81.83, "
-                "laser at the robot centre, 5 Hz",
+      {"plain",
+       "FLASER, 180 beams of 1° from −90° (the Intel data set's layout), 50 m, no return 81.83, "
+       "laser at the robot centre, 5 Hz",
        [] {
          LaserSpec s = make("plain", "flaser", 180, 1.0, 50.0, 81.83, 0.0, 0.2);
          s.start_deg = -90.0;  // even beam count: −90°, −89°, …, 89° (the FLASER convention)
          s.error_code_probability = 0.0;
          return s;
        }},
-      {"sick181", "ROBOTLASER1, 181 beams of 1° (−90°…90°), 50 m, no return 81.83 with SICK error codes, "
-                  "laser 0.22 m ahead, 5 Hz",
+      {"sick181",
+       "ROBOTLASER1, 181 beams of 1° (−90°…90°), 50 m, no return 81.83 with SICK error codes, "
+       "laser 0.22 m ahead, 5 Hz",
        [] { return make("sick181", "robotlaser1", 181, 1.0, 50.0, 81.83, 0.22, 0.2); }},
-      {"sick_interleaved", "ROBOTLASER1, 181 beams of 1° whose start alternates among 4 angles 0.25° apart, "
-                           "no return 81.83, laser 0.22 m ahead, 10 Hz (dense)",
+      {"sick_interleaved",
+       "ROBOTLASER1, 181 beams of 1° whose start alternates among 4 angles 0.25° apart, "
+       "no return 81.83, laser 0.22 m ahead, 10 Hz (dense)",
        [] {
          LaserSpec s = make("sick_interleaved", "robotlaser1", 181, 1.0, 50.0, 81.83, 0.22, 0.1);
          s.interleave = 4;
          s.interleave_step_deg = 0.25;
          return s;
        }},
-      {"sick360", "ROBOTLASER1, 360 beams of 0.5°, 40 m, no return 50.0 (another driver's code) with error "
-                  "codes below it, laser 0.22 m ahead, 2 Hz",
+      {"sick360",
+       "ROBOTLASER1, 360 beams of 0.5°, 40 m, no return 50.0 (another driver's code) with error "
+       "codes below it, laser 0.22 m ahead, 2 Hz",
        [] { return make("sick360", "robotlaser1", 360, 0.5, 40.0, 50.0, 0.22, 0.5); }},
       {"lms541", "ROBOTLASER1, 541 beams of 0.5° (270°), 20 m, no return 50.0, laser 0.22 m ahead, 10 Hz",
        [] { return make("lms541", "robotlaser1", 541, 0.5, 20.0, 50.0, 0.22, 0.1); }},
-      {"hokuyo1080", "ROBOTLASER1, 1080 beams of 0.25° (270°), 30 m, no return 50.0, σ 1.5 cm, "
-                     "laser 0.22 m ahead, 10 Hz",
+      {"hokuyo1080",
+       "ROBOTLASER1, 1080 beams of 0.25° (270°), 30 m, no return 50.0, σ 1.5 cm, "
+       "laser 0.22 m ahead, 10 Hz",
        [] {
          LaserSpec s = make("hokuyo1080", "robotlaser1", 1080, 0.25, 30.0, 50.0, 0.22, 0.1);
          s.range_sigma = 0.015;
          return s;
        }},
-      {"short8", "ROBOTLASER1, 181 beams of 1°, 8 m (an old SICK in cm mode), no return 81.83, laser 0.22 m "
-                 "ahead, 5 Hz",
+      {"short8",
+       "ROBOTLASER1, 181 beams of 1°, 8 m (an old SICK in cm mode), no return 81.83, laser 0.22 m "
+       "ahead, 5 Hz",
        [] { return make("short8", "robotlaser1", 181, 1.0, 8.0, 81.83, 0.22, 0.2); }},
-      {"sparse", "ROBOTLASER1, 181 beams of 1°, 50 m, no return 81.83, laser 0.22 m ahead, one scan every "
-                 "1.5 s and 3 % chance per scan of a 2–6 s gap",
+      {"sparse",
+       "ROBOTLASER1, 181 beams of 1°, 50 m, no return 81.83, laser 0.22 m ahead, one scan every "
+       "1.5 s and 3 % chance per scan of a 2–6 s gap",
        [] {
          LaserSpec s = make("sparse", "robotlaser1", 181, 1.0, 50.0, 81.83, 0.22, 1.5);
          s.gap_probability = 0.03;
@@ -142,14 +149,22 @@ void set_laser_param(LaserSpec& s, const std::string& key_value) {
   const auto eq = key_value.find('=');
   if (eq == std::string::npos) throw std::invalid_argument("laser parameter '" + key_value + "': expected key=value");
   const std::string key = key_value.substr(0, eq), value = key_value.substr(eq + 1);
-  const std::map<std::string, double*> doubles = {
-      {"resolution_deg", &s.resolution_deg}, {"start_deg", &s.start_deg},
-      {"interleave_step_deg", &s.interleave_step_deg}, {"max_range", &s.max_range},
-      {"no_return", &s.no_return}, {"error_code_probability", &s.error_code_probability},
-      {"range_sigma", &s.range_sigma}, {"mount_x", &s.mount_x}, {"mount_y", &s.mount_y},
-      {"mount_theta_deg", &s.mount_theta_deg}, {"interval", &s.interval},
-      {"interval_jitter", &s.interval_jitter}, {"gap_probability", &s.gap_probability},
-      {"gap_min", &s.gap_min}, {"gap_max", &s.gap_max}, {"odom_interval", &s.odom_interval}};
+  const std::map<std::string, double*> doubles = {{"resolution_deg", &s.resolution_deg},
+                                                  {"start_deg", &s.start_deg},
+                                                  {"interleave_step_deg", &s.interleave_step_deg},
+                                                  {"max_range", &s.max_range},
+                                                  {"no_return", &s.no_return},
+                                                  {"error_code_probability", &s.error_code_probability},
+                                                  {"range_sigma", &s.range_sigma},
+                                                  {"mount_x", &s.mount_x},
+                                                  {"mount_y", &s.mount_y},
+                                                  {"mount_theta_deg", &s.mount_theta_deg},
+                                                  {"interval", &s.interval},
+                                                  {"interval_jitter", &s.interval_jitter},
+                                                  {"gap_probability", &s.gap_probability},
+                                                  {"gap_min", &s.gap_min},
+                                                  {"gap_max", &s.gap_max},
+                                                  {"odom_interval", &s.odom_interval}};
   if (auto it = doubles.find(key); it != doubles.end()) {
     *it->second = parse_double(key, value);
   } else if (key == "beams") {
@@ -179,8 +194,8 @@ void validate(const LaserSpec& s) {
   require((s.beams - 1) * s.resolution_deg + s.interleave_step_deg * (s.interleave - 1) <= 360.0 + 1e-9,
           "beams × resolution exceeds 360°");
   require(s.max_range > 0.5 && s.max_range <= 100.0, "max_range must be in (0.5, 100] m");
-  require(s.no_return >= s.max_range, "no_return (" + std::to_string(s.no_return) +
-                                          ") must be at least max_range (" + std::to_string(s.max_range) +
+  require(s.no_return >= s.max_range, "no_return (" + std::to_string(s.no_return) + ") must be at least max_range (" +
+                                          std::to_string(s.max_range) +
                                           "): a real return must never read as the no-return code");
   require(s.error_code_probability >= 0.0 && s.error_code_probability <= 0.5,
           "error_code_probability must be in [0, 0.5]");

@@ -25,23 +25,23 @@
 namespace mspace::sim_building {
 
 struct LaserSpec {
-  std::string preset = "sick181";  ///< name of the preset it started from
+  std::string preset = "sick181";      ///< name of the preset it started from
   std::string format = "robotlaser1";  ///< robotlaser1 | flaser
   int beams = 181;
   double resolution_deg = 1.0;
-  double start_deg = -90.0;        ///< bearing of beam 0 (without the interleave offset)
-  int interleave = 1;              ///< number of alternating start offsets
+  double start_deg = -90.0;  ///< bearing of beam 0 (without the interleave offset)
+  int interleave = 1;        ///< number of alternating start offsets
   double interleave_step_deg = 0.25;
-  double max_range = 50.0;         ///< m
-  double no_return = 81.83;        ///< value written for a beam with no return (m)
+  double max_range = 50.0;   ///< m
+  double no_return = 81.83;  ///< value written for a beam with no return (m)
   double error_code_probability = 0.001;
-  double range_sigma = 0.01;       ///< m
+  double range_sigma = 0.01;                                    ///< m
   double mount_x = 0.22, mount_y = 0.0, mount_theta_deg = 0.0;  ///< laser pose on the robot (m, deg)
-  double interval = 0.2;           ///< s between scans
-  double interval_jitter = 0.05;   ///< relative
-  double gap_probability = 0.0;    ///< per scan
-  double gap_min = 2.0, gap_max = 6.0;  ///< s
-  double odom_interval = 0.1;      ///< s between ODOM lines
+  double interval = 0.2;                                        ///< s between scans
+  double interval_jitter = 0.05;                                ///< relative
+  double gap_probability = 0.0;                                 ///< per scan
+  double gap_min = 2.0, gap_max = 6.0;                          ///< s
+  double odom_interval = 0.1;                                   ///< s between ODOM lines
 
   /// Bearing of beam i of the k-th scan (rad, laser frame).
   double bearing(int i, long k) const;

@@ -60,8 +60,7 @@ int edge_index(const FloorPlan& plan, int u, int v) {
     if ((plan.edges[e].first == u && plan.edges[e].second == v) ||
         (plan.edges[e].first == v && plan.edges[e].second == u))
       return static_cast<int>(e);
-  throw std::runtime_error("floor plan: no corridor between nodes " + std::to_string(u) + " and " +
-                           std::to_string(v));
+  throw std::runtime_error("floor plan: no corridor between nodes " + std::to_string(u) + " and " + std::to_string(v));
 }
 
 class WaypointPlanner {
@@ -156,8 +155,8 @@ class WaypointPlanner {
 /// at v_max, brake to v_out, with acceleration a (v² = v₀² + 2·a·s); at least
 /// a creep speed so that a line starting or ending at rest is still driven.
 double line_speed(double s, double length, double v_in, double v_max, double v_out, double a) {
-  const double v = std::min({v_max, std::sqrt(v_in * v_in + 2.0 * a * s),
-                             std::sqrt(v_out * v_out + 2.0 * a * std::max(0.0, length - s))});
+  const double v = std::min(
+      {v_max, std::sqrt(v_in * v_in + 2.0 * a * s), std::sqrt(v_out * v_out + 2.0 * a * std::max(0.0, length - s))});
   return std::max(v, 0.03);
 }
 

@@ -52,10 +52,10 @@ struct RouteOptions {
 };
 
 struct RouteSample {
-  double t = 0.0;             ///< s since the start
+  double t = 0.0;              ///< s since the start
   Pose2 pose = Pose2::Zero();  ///< true robot pose in the plan's frame
-  double v = 0.0;             ///< forward speed (m/s)
-  double w = 0.0;             ///< turn rate (rad/s)
+  double v = 0.0;              ///< forward speed (m/s)
+  double w = 0.0;              ///< turn rate (rad/s)
 };
 
 struct Route {
@@ -72,12 +72,12 @@ std::vector<Vec2> plan_waypoints(const FloorPlan& plan, std::uint64_t seed, cons
 Route drive(const std::vector<Vec2>& waypoints, std::uint64_t seed, const RouteOptions& options);
 
 struct OdometryErrors {
-  double scale_error = 0.01;            ///< relative error of the distance
-  double turn_scale_error = 0.01;       ///< relative error of the turn
-  double heading_bias_deg_per_m = 0.05; ///< heading drift per metre driven
-  double xy_noise = 0.005;              ///< σ_xy, m per √m
-  double heading_noise_deg = 0.1;       ///< σ_θ, deg per √m
-  double turn_noise = 0.01;             ///< σ_turn, rad per √rad turned
+  double scale_error = 0.01;             ///< relative error of the distance
+  double turn_scale_error = 0.01;        ///< relative error of the turn
+  double heading_bias_deg_per_m = 0.05;  ///< heading drift per metre driven
+  double xy_noise = 0.005;               ///< σ_xy, m per √m
+  double heading_noise_deg = 0.1;        ///< σ_θ, deg per √m
+  double turn_noise = 0.01;              ///< σ_turn, rad per √rad turned
 };
 
 /// Dead-reckoned odometry pose at every sample, starting at (0, 0, 0).

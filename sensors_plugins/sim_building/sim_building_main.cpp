@@ -23,21 +23,20 @@ void set_param(GeneratorSettings& s, const std::string& key_value) {
   const auto eq = key_value.find('=');
   if (eq == std::string::npos) throw std::invalid_argument("parameter '" + key_value + "': expected key=value");
   const std::string key = key_value.substr(0, eq), text = key_value.substr(eq + 1);
-  const std::map<std::string, double*> keys = {
-      {"scale_error", &s.odometry.scale_error},
-      {"turn_scale_error", &s.odometry.turn_scale_error},
-      {"heading_bias_deg_per_m", &s.odometry.heading_bias_deg_per_m},
-      {"xy_noise", &s.odometry.xy_noise},
-      {"heading_noise_deg", &s.odometry.heading_noise_deg},
-      {"turn_noise", &s.odometry.turn_noise},
-      {"room_visit_probability", &s.route.room_visit_probability},
-      {"min_speed", &s.route.min_speed},
-      {"max_speed", &s.route.max_speed},
-      {"accel", &s.route.accel},
-      {"arc_radius", &s.route.arc_radius},
-      {"arc_speed", &s.route.arc_speed},
-      {"turn_rate", &s.route.turn_rate},
-      {"turn_accel", &s.route.turn_accel}};
+  const std::map<std::string, double*> keys = {{"scale_error", &s.odometry.scale_error},
+                                               {"turn_scale_error", &s.odometry.turn_scale_error},
+                                               {"heading_bias_deg_per_m", &s.odometry.heading_bias_deg_per_m},
+                                               {"xy_noise", &s.odometry.xy_noise},
+                                               {"heading_noise_deg", &s.odometry.heading_noise_deg},
+                                               {"turn_noise", &s.odometry.turn_noise},
+                                               {"room_visit_probability", &s.route.room_visit_probability},
+                                               {"min_speed", &s.route.min_speed},
+                                               {"max_speed", &s.route.max_speed},
+                                               {"accel", &s.route.accel},
+                                               {"arc_radius", &s.route.arc_radius},
+                                               {"arc_speed", &s.route.arc_speed},
+                                               {"turn_rate", &s.route.turn_rate},
+                                               {"turn_accel", &s.route.turn_accel}};
   const auto it = keys.find(key);
   if (it == keys.end()) {
     std::string list;
@@ -59,26 +58,40 @@ void set_param(GeneratorSettings& s, const std::string& key_value) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  const CLI::Validator kSeed(
+      [](std::string& text) {
+        return text.find_first_not_of("0123456789") == std::string::npos && !text.empty()
+                   ? std::string()
+                   : "'" + text + "' is not a non-negative integer";
+      },
+      "UINT");
   GeneratorSettings settings;
   std::string out, preset = "sick181";
   std::vector<std::string> laser_params, params;
   bool list = false, no_clutter = false;
-  CLI::App app{"Write a simulated office building data set for 2-D laser SLAM: building.clf (CARMEN log), "
-               "ground_truth.tum, odometry.tum, building.relations, floor_plan.yaml, floor_plan.png, README.txt"};
+  CLI::App app{
+      "Write a simulated office building data set for 2-D laser SLAM: building.clf (CARMEN log), "
+      "ground_truth.tum, odometry.tum, building.relations, floor_plan.yaml, floor_plan.png, README.txt"};
   app.add_option("--out", out, "output folder (created if needed)");
   app.add_option("--plan", settings.plan, "plan family, by name or index (--list)")->capture_default_str();
-  app.add_option("--world-seed", settings.world_seed, "seed of the floor plan")->capture_default_str();
+  app.add_option("--world-seed", settings.world_seed, "seed of the floor plan")
+      ->check(kSeed)
+      ->capture_default_str();
   app.add_option("--seed", settings.seed, "seed of the route, the odometry errors and the laser noise")
+      ->check(kSeed)
       ->capture_default_str();
   app.add_option("--laser", preset, "laser preset (--list)")->capture_default_str();
-  app.add_option("--laser-param", laser_params, "override a laser parameter, key=value (repeatable), e.g. "
-                                                "beams=360 resolution_deg=0.5 interleave=4 no_return=50 mount_x=0.22");
+  app.add_option("--laser-param", laser_params,
+                 "override a laser parameter, key=value (repeatable), e.g. "
+                 "beams=360 resolution_deg=0.5 interleave=4 no_return=50 mount_x=0.22");
   app.add_option("--param", params,
                  "override an odometry-error or route parameter, key=value (repeatable), e.g. "
                  "heading_bias_deg_per_m=0.3 scale_error=0.02 max_speed=0.8");
   app.add_option("--length-m", settings.route.length_m, "drive at least this far before the final lap of loop 0")
+      ->check(CLI::Range(0.0, 20000.0))
       ->capture_default_str();
-  app.add_option("--people", settings.plan_options.people, "moving people (default: the plan's, -1)");
+  app.add_option("--people", settings.plan_options.people, "moving people (default: the plan's, -1)")
+      ->check(CLI::Range(-1, 50));
   app.add_flag("--no-clutter", no_clutter, "no boxes or pillars in the rooms");
   app.add_flag("--list", list, "list the plans and laser presets and exit");
   CLI11_PARSE(app, argc, argv);

@@ -17,7 +17,6 @@
 // the runs whose long-relation error exceeds their odometry's: the map should
 // never be worse than the odometry it was built on.
 #include <CLI/CLI.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -87,9 +86,11 @@ std::vector<StampedPose> odometry_poses(const InstanceConfig& source) {
     std::sort(v.begin(), v.end());
     return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
   };
-  std::fprintf(stderr, "  %s odometry per step: xy median %.4f p99 %.4f max %.3f m (t %.1f), theta median %.3f p99 %.3f max %.2f deg\n",
-               source.params.get_string("odometry").c_str(), quantile(dxy, 0.5), quantile(dxy, 0.99), worst, worst_t,
-               quantile(dth, 0.5), quantile(dth, 0.99), quantile(dth, 1.0));
+  std::fprintf(
+      stderr,
+      "  %s odometry per step: xy median %.4f p99 %.4f max %.3f m (t %.1f), theta median %.3f p99 %.3f max %.2f deg\n",
+      source.params.get_string("odometry").c_str(), quantile(dxy, 0.5), quantile(dxy, 0.99), worst, worst_t,
+      quantile(dth, 0.5), quantile(dth, 0.99), quantile(dth, 1.0));
   std::vector<StampedPose> out;
   for (const carmen_log::Scan& s : log.contents().scans)
     out.push_back({s.t, make_pose2d(s.odometry[0], s.odometry[1], s.odometry[2])});
@@ -157,8 +158,7 @@ int main(int argc, char** argv) {
         const sim_building::Simulation sim = sim_building::simulate(settings);
         const fs::path dir = fs::path(out) / (sim.plan.name + "_" + seed_text);
         sim_building::write_data_set(sim, dir);
-        const double gen_s =
-            std::chrono::duration<double>(std::chrono::steady_clock::now() - t_gen).count();
+        const double gen_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_gen).count();
         setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
         std::vector<Relation> all = read_relations(dir / "building.relations"), near, far;
         for (const Relation& r : all) (r.t2 - r.t1 >= 60.0 ? far : near).push_back(r);
@@ -192,12 +192,12 @@ int main(int argc, char** argv) {
             for (const auto& [dim, n] : dims) walls += n;
           ++runs;
           if (sf.translation > of.translation) ++worse;
-          std::printf("%-10s %4s %-12s %5zu %5zu | %6.3f / %5.2f  %6.3f / %5.2f  | %6.2f / %5.1f  %6.2f / %5.1f  | "
-                      "%6.2f %5d %6.1f %6.0f\n",
-                      sim.plan.name.c_str(), seed_text.c_str(), mode.c_str(), sn.n, sf.n, on.translation,
-                      on.rotation, sn.translation, sn.rotation, of.translation, of.rotation, sf.translation,
-                      sf.rotation, r.summary.errors ? r.summary.errors->ate_rmse : -1.0, walls, slam_s,
-                      r.summary.data_seconds);
+          std::printf(
+              "%-10s %4s %-12s %5zu %5zu | %6.3f / %5.2f  %6.3f / %5.2f  | %6.2f / %5.1f  %6.2f / %5.1f  | "
+              "%6.2f %5d %6.1f %6.0f\n",
+              sim.plan.name.c_str(), seed_text.c_str(), mode.c_str(), sn.n, sf.n, on.translation, on.rotation,
+              sn.translation, sn.rotation, of.translation, of.rotation, sf.translation, sf.rotation,
+              r.summary.errors ? r.summary.errors->ate_rmse : -1.0, walls, slam_s, r.summary.data_seconds);
           std::fflush(stdout);
         }
         std::fprintf(stderr, "  (%s seed %s: %.0f m route, %zu scans, generated in %.1f s)\n", sim.plan.name.c_str(),

@@ -144,9 +144,9 @@ TEST(RayCaster, HandComputedDistances) {
   EXPECT_NEAR(empty.cast(o, kPi / 2, 10.0), 3.0, 1e-12);
   EXPECT_NEAR(empty.cast(o, kPi, 10.0), 1.0, 1e-12);
   EXPECT_NEAR(empty.cast(o, -kPi / 2, 10.0), 1.0, 1e-12);
-  EXPECT_NEAR(empty.cast(o, kPi / 4, 10.0), 3.0 * std::sqrt(2.0), 1e-12);      // into the corner (4, 4)
+  EXPECT_NEAR(empty.cast(o, kPi / 4, 10.0), 3.0 * std::sqrt(2.0), 1e-12);          // into the corner (4, 4)
   EXPECT_NEAR(empty.cast(o, std::atan2(3.0, 1.0), 10.0), std::sqrt(10.0), 1e-12);  // top wall at x = 2
-  EXPECT_TRUE(std::isinf(empty.cast(o, 0.0, 2.5)));                            // beyond max range
+  EXPECT_TRUE(std::isinf(empty.cast(o, 0.0, 2.5)));                                // beyond max range
   const RayCaster with_pillar(room, {{{3, 1}, 0.5}});
   EXPECT_NEAR(with_pillar.cast(o, 0.0, 10.0), 1.5, 1e-12);
   // Tangent-ish: the ray y = 1.4 meets the circle at x = 3 − √(0.25 − 0.16) = 2.7.
@@ -170,7 +170,8 @@ TEST(RayCaster, BucketsGiveTheBruteForceAnswer) {
     const Vec2 o(rng.uniform(b.x0, b.x1), rng.uniform(b.y0, b.y1));
     const double angle = rng.uniform(-kPi, kPi);
     double brute = std::numeric_limits<double>::infinity();
-    for (const Segment& s : segments) brute = std::min(brute, ray_segment(o, Vec2(std::cos(angle), std::sin(angle)), s));
+    for (const Segment& s : segments)
+      brute = std::min(brute, ray_segment(o, Vec2(std::cos(angle), std::sin(angle)), s));
     if (brute > 80.0) brute = std::numeric_limits<double>::infinity();
     const double fast = caster.cast(o, angle, 80.0);
     if (std::isinf(brute)) {
@@ -282,8 +283,8 @@ TEST(SimBuilding, GroundTruthIncrementsMatchTheRoute) {
   // The route is what it says: speeds within 0.3–1 m/s while cruising, never faster.
   double fastest = 0.0;
   for (std::size_t k = 1; k < sim.route.samples.size(); ++k)
-    fastest = std::max(fastest, (sim.route.samples[k].pose.head<2>() - sim.route.samples[k - 1].pose.head<2>()).norm() /
-                                    s.route.dt);
+    fastest = std::max(
+        fastest, (sim.route.samples[k].pose.head<2>() - sim.route.samples[k - 1].pose.head<2>()).norm() / s.route.dt);
   EXPECT_LE(fastest, s.route.max_speed + 1e-9);
   EXPECT_GT(fastest, s.route.min_speed);
 }
