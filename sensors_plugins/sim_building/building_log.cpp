@@ -345,6 +345,8 @@ void write_readme(const Simulation& sim, const std::filesystem::path& file) {
       << ", 0, 0]\n";
   if (s.laser.format == "flaser")
     out << "  source.flaser_fov_deg: " << s.laser.beams * s.laser.resolution_deg << " (FLASER lines carry no angles)\n";
+  out << "  source.scan_match_laser_pose: [" << s.laser.mount_x << ", " << s.laser.mount_y << ", "
+      << s.laser.mount_theta_deg << "]\n";
   out << "  source.no_return_range: at most " << fmt("%.2f", s.laser.no_return - 0.05) << " (the no-return code "
       << s.laser.no_return << " and the error codes just below it)\n";
   close_checked(out, file);

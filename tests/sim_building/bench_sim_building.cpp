@@ -23,6 +23,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
+#include <numbers>
 #include <filesystem>
 #include <sstream>
 #include <string>
@@ -78,7 +79,7 @@ std::vector<StampedPose> odometry_poses(const InstanceConfig& source) {
     const Eigen::Vector3d o = carmen_log::odometry_increment(scans[k - 1].odometry, scans[k].odometry);
     const Eigen::Vector3d g = carmen_log::odometry_increment(*scans[k - 1].ground_truth, *scans[k].ground_truth);
     dxy.push_back(std::hypot(o[0] - g[0], o[1] - g[1]));
-    dth.push_back(std::abs(std::remainder(o[2] - g[2], 2 * M_PI)) * 180.0 / M_PI);
+    dth.push_back(std::abs(std::remainder(o[2] - g[2], 2.0 * std::numbers::pi)) * 180.0 / std::numbers::pi);
     if (dxy.back() > worst) worst = dxy.back(), worst_t = scans[k].t;
   }
   auto quantile = [](std::vector<double> v, double q) {
