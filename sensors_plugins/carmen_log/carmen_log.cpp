@@ -2,7 +2,11 @@
 #include "carmen_log.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <fstream>
 #include <numbers>
+#include <optional>
+#include <sstream>
 #include <stdexcept>
 
 #include "mspace/pose.hpp"
@@ -37,7 +41,77 @@ Pose2 apply_increment(const Pose2& a, const Eigen::Vector3d& d) {
   return {a[0] + c * d[0] - s * d[1], a[1] + s * d[0] + c * d[1], std::remainder(a[2] + d[2], 2.0 * std::numbers::pi)};
 }
 
+struct TumPose {
+  double t = 0.0;
+  Pose2 pose = Pose2::Zero();
+};
+
+/// Reads a TUM trajectory `t x y z qx qy qz qw` (planar: x, y and the yaw of
+/// the quaternion); '#' lines and empty lines are skipped. Throws
+/// "file:line: problem" for a malformed line or time stamps that go backwards.
+std::vector<TumPose> read_tum(const std::string& file, double time_offset) {
+  std::ifstream in(file);
+  if (!in) throw std::runtime_error(file + ": cannot open the ground-truth file");
+  std::vector<TumPose> poses;
+  std::string line;
+  for (int line_no = 1; std::getline(in, line); ++line_no) {
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    std::istringstream fields(line);
+    double t, x, y, z, qx, qy, qz, qw;
+    std::string extra;
+    const std::string where = file + ":" + std::to_string(line_no) + ": ";
+    if (!(fields >> t >> x >> y >> z >> qx >> qy >> qz >> qw) || (fields >> extra) ||
+        !std::isfinite(t + x + y + z + qx + qy + qz + qw))
+      throw std::runtime_error(where + "expected 8 finite numbers `t x y z qx qy qz qw` (TUM)");
+    const double norm = std::sqrt(qx * qx + qy * qy + qz * qz + qw * qw);
+    if (std::abs(norm - 1.0) > 1e-3) throw std::runtime_error(where + "the quaternion is not of unit length");
+    if (!poses.empty() && t + time_offset < poses.back().t)
+      throw std::runtime_error(where + "time stamps go backwards");
+    // Yaw of the rotation (the z-y-x Euler angle about z).
+    const double yaw = std::atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz));
+    poses.push_back({t + time_offset, Pose2(x, y, yaw)});
+  }
+  if (poses.empty()) throw std::runtime_error(file + ": no poses in the ground-truth file");
+  return poses;
+}
+
+/// The pose at time t, linear between the two poses around it (angle along
+/// the shorter way) when they are at most max_gap apart; none otherwise.
+std::optional<Pose2> pose_at(const std::vector<TumPose>& poses, double t, double max_gap) {
+  const auto later =
+      std::lower_bound(poses.begin(), poses.end(), t, [](const TumPose& p, double value) { return p.t < value; });
+  if (later == poses.end()) return std::nullopt;
+  if (later->t == t) return later->pose;
+  if (later == poses.begin()) return std::nullopt;
+  const TumPose& a = *std::prev(later);
+  const TumPose& b = *later;
+  if (b.t - a.t > max_gap) return std::nullopt;
+  const double u = (t - a.t) / (b.t - a.t);
+  Pose2 p = a.pose + u * (b.pose - a.pose);
+  p[2] = std::remainder(a.pose[2] + u * std::remainder(b.pose[2] - a.pose[2], 2.0 * std::numbers::pi),
+                        2.0 * std::numbers::pi);
+  return p;
+}
+
 }  // namespace
+
+/// Replaces every scan's ground truth by the poses of a TUM file at the scan
+/// times (see the `ground_truth` parameter).
+void CarmenLogSource::ground_truth_from_file(const Params& params, const std::string& file, Logger& log) {
+  const std::vector<TumPose> poses = read_tum(file, params.get_double("time_offset"));
+  const double max_gap = params.get_double("ground_truth_max_gap");
+  std::size_t with = 0;
+  for (Scan& scan : log_.scans) {
+    scan.ground_truth = pose_at(poses, scan.t, max_gap);
+    if (scan.ground_truth) ++with;
+  }
+  log.info("ground truth from ", file, ": ", poses.size(), " poses, ", with, " of ", log_.scans.size(),
+           " scans lie between two of them at most ", max_gap, " s apart");
+  if (with == 0)
+    throw std::runtime_error(file + ": no scan time of " + file_ +
+                             " lies between two ground-truth poses (wrong file or time base?)");
+}
 
 /// Replaces every scan's odometry pose by laser odometry: the increment from
 /// the previous scan is the scan match of the two scans for the laser at
@@ -124,7 +198,13 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                    "largest distance (m) between paired points in the first ICP iteration (it shrinks to 0.1 m): "
                    "at least the wheel odometry's error between two scans",
                    0.05, 5.0),
-      param_bool("ground_truth", true, "deliver the corrected poses as ground truth when the file has them"),
+      param_string("ground_truth", "log",
+                   "ground truth: `log` = the corrected poses of the log when it has them (table, GMapping log), "
+                   "`none`, or a TUM file `t x y z qx qy qz qw` (time base of the log, time_offset added) whose "
+                   "poses are interpolated at the scan times (true/false: log/none)"),
+      param_double("ground_truth_max_gap", 0.5,
+                   "a scan gets ground truth from the TUM file only between two poses at most this far apart (s)",
+                   0.0),
       param_string("initial_pose", "ground_truth",
                    "start at the first scan's ground truth (else its odometry), its odometry pose, or zero",
                    {"ground_truth", "odometry", "zero"}),
@@ -134,8 +214,9 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
 CarmenLogSource::CarmenLogSource(const PluginArgs& args)
     : file_(args.params.get_string("file")),
       channel_(args.params.get_string("channel")),
-      use_ground_truth_(args.params.get_bool("ground_truth")),
       log_out_(args.logger) {
+  const std::string& ground_truth = args.params.get_string("ground_truth");
+  use_ground_truth_ = ground_truth != "none" && ground_truth != "false";
   Logger& log = args.log();
   log_ = read_log(args.params.get_string("file"), options_from(args.params));
   if (log_.scans.empty()) throw std::runtime_error(args.params.get_string("file") + ": no laser scans in the file");
@@ -156,6 +237,8 @@ CarmenLogSource::CarmenLogSource(const PluginArgs& args)
     mount_ = *log_.laser.offset;
     log.info("laser offset on the robot ", mount_.transpose(), " (", log_.laser.offset_origin, ")");
   }
+  if (use_ground_truth_ && ground_truth != "log" && ground_truth != "true")
+    ground_truth_from_file(args.params, ground_truth, log);
   if (args.params.get_string("odometry") == "scan_matched") scan_match_odometry(args.params, log);
 
   const Scan& first = log_.scans.front();

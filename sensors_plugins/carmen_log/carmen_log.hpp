@@ -17,7 +17,9 @@
 //     for a beam with no return (the `laser_lines` extractor relies on the
 //     beam order and on seeing the no-return beams);
 //   - DataStep::ground_truth: the GMapping-corrected pose when the file has
-//     one (table, GMapping log) and `ground_truth` is on.
+//     one (table, GMapping log) and `ground_truth: log`; or, with
+//     `ground_truth: FILE`, the pose of a TUM trajectory interpolated at the
+//     scan time (e.g. a simulator's ground_truth.tum); none with `none`.
 // The initial pose is the first scan's ground truth (initial_pose:
 // ground_truth, falling back to odometry when there is none), its odometry
 // pose, or zero.
@@ -53,6 +55,7 @@ class CarmenLogSource final : public DataSource {
 
  private:
   void scan_match_odometry(const Params& params, Logger& log);
+  void ground_truth_from_file(const Params& params, const std::string& file, Logger& log);
 
   std::string file_;
   LogContents log_;
