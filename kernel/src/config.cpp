@@ -684,6 +684,22 @@ RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registr
   return parse_config(text.str(), file.string(), registry);
 }
 
+void override_estimator(RunConfig& config, const std::string& plugin, PluginRegistry& registry) {
+  if (config.estimator.plugin == plugin) return;
+  std::shared_ptr<const LoadedPlugin> loaded;
+  try {
+    loaded = registry.load(plugin);
+  } catch (const PluginError& e) {
+    throw ConfigError(std::string("--estimator ") + plugin + ": " + e.what());
+  }
+  if (loaded->descriptor->kind != PluginKind::Estimator)
+    throw ConfigError(std::string("--estimator ") + plugin + ": " +
+                      kind_mismatch_message(plugin, loaded->descriptor->kind, PluginKind::Estimator));
+  config.estimator.plugin = plugin;
+  config.estimator.params = Params::defaults(loaded->descriptor->params);
+  config.estimator.where = "--estimator";
+}
+
 std::string effective_config_yaml(const RunConfig& c) {
   YAML::Emitter out;
   out << YAML::BeginMap;

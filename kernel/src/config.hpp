@@ -145,6 +145,13 @@ void apply_run_seed(RunConfig& config);
 
 std::string effective_config_yaml(const RunConfig& config);
 
+/// The CLI's --estimator: runs `plugin` as the estimator. The YAML's estimator
+/// parameters are kept when it names the same plugin; otherwise the plugin's
+/// own defaults are used (each estimator keeps its own options, so e.g. cekf's
+/// max_active does not follow a switch to ekf). ConfigError for an unknown
+/// plugin or one that is not an estimator, naming the known ones.
+void override_estimator(RunConfig& config, const std::string& plugin, PluginRegistry& registry);
+
 /// Expands ${VAR} and ${VAR:-default} (default used when VAR is unset or
 /// empty). Throws std::invalid_argument for an unset variable without default
 /// or an unterminated "${".

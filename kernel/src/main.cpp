@@ -52,7 +52,7 @@ RunConfig load(const std::string& file, PluginRegistry& registry) {
 }
 
 int cmd_run(const std::string& file, const std::string& out, long long max_steps, std::optional<long long> seed,
-            bool quiet, const CommonOptions& common) {
+            const std::string& estimator, bool quiet, const CommonOptions& common) {
   PluginRegistry registry;
   setup_registry(registry, common);
   RunConfig config = load(file, registry);
@@ -61,6 +61,7 @@ int cmd_run(const std::string& file, const std::string& out, long long max_steps
   if (!out.empty()) config.output.dir = out;
   if (max_steps > 0) config.max_steps = max_steps;
   if (seed) config.seed = *seed;
+  if (!estimator.empty()) override_estimator(config, estimator, registry);
   apply_run_seed(config);
   // One line of what runs; the whole resolved configuration at debug level
   // (or with `mspace config`).
@@ -173,6 +174,10 @@ int main(int argc, char** argv) {
   run->add_option("--out", out_dir, "output folder (overrides output.dir)");
   run->add_option("--max-steps", max_steps, "stop after this many steps");
   run->add_option("--seed", seed, "seed for every plugin with a `seed` parameter (overrides run.seed)");
+  std::string estimator;
+  run->add_option("--estimator", estimator,
+                  "run this estimator plugin instead of the configuration's (e.g. ekf, cekf, smoother), with its "
+                  "own default options");
   run->add_flag("--quiet", quiet, "no progress output");
   add_common(run, common);
 
@@ -199,7 +204,7 @@ int main(int argc, char** argv) {
   }
   CLI11_PARSE(app, argc, argv);
   try {
-    if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, seed, quiet, common);
+    if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, seed, estimator, quiet, common);
     if (plugins->parsed()) return cmd_plugins(common);
     if (config->parsed()) return cmd_config(config_file, common);
     if (check->parsed()) {

@@ -44,6 +44,10 @@ class WallRun : public ::testing::Test {
     return run_to_end(slam, options);
   }
 
+  /// config/intel_walls.yaml (under `estimator` if given) scored on the
+  /// Intel relations: at most `target` m mean translation error.
+  void expect_intel_relations(const std::string& estimator, double target);
+
   PluginRegistry registry_;
 };
 
@@ -166,16 +170,21 @@ TEST_F(WallRun, SimulatedFloorWithSharedCorners) {
 // config/intel_walls.yaml as `mspace run` runs it, scored on the 90
 // relations that fall on the 910 scans (max_dt 1e-4 s; raw odometry scores
 // 3.31 m there, GMapping 0.036 m). Measured with laser odometry, the motion
-// noise set from its measured errors and shared corners: 0.091 ± 0.191 m,
-// 0.71° mean (0.083 m without corners; laser odometry alone 0.86 m). The
-// issue's target: at most 0.10 m.
-TEST_F(WallRun, IntelLabRelationsWithinTarget) {
+// noise set from its measured errors, shared corners and joint
+// compatibility: the smoother 0.018 ± 0.022 m, 0.29° (issue 10's target:
+// at most 0.05 m); the ekf on the same file 0.077 ± 0.143 m (the first
+// issue's target: at most 0.10 m).
+TEST_F(WallRun, IntelLabRelationsWithinTarget) { expect_intel_relations("", 0.05); }
+TEST_F(WallRun, IntelLabRelationsWithinTargetUnderTheEkf) { expect_intel_relations("ekf", 0.10); }
+
+void WallRun::expect_intel_relations(const std::string& estimator, double target) {
   if (!std::filesystem::is_regular_file(kIntelDir / "intel_910_scans.txt") ||
       !std::filesystem::is_regular_file(kIntelDir / "intel.relations"))
     GTEST_SKIP() << "Intel Research Lab data not found in " << kIntelDir << " (see config/intel_walls.yaml)";
   const std::string data = (kSource.parent_path() / "shared" / "datasets").string();
   setenv("MSPACE_DATA", data.c_str(), /*overwrite=*/0);
   RunConfig c = load_config(kSource / "config" / "intel_walls.yaml", registry_);
+  if (!estimator.empty()) override_estimator(c, estimator, registry_);
   c.evaluation.relations = (kIntelDir / "intel.relations").string();
   c.evaluation.relations_max_dt = 1e-4;
   Slam slam(c, registry_);
@@ -183,11 +192,11 @@ TEST_F(WallRun, IntelLabRelationsWithinTarget) {
   }
   const RelationErrors e =
       evaluate_relations(slam.trajectory(), read_relations(kIntelDir / "intel.relations"), 1e-4);
-  std::cout << "Intel: " << e.matched << " relations, translation " << e.translation.mean << " ± "
+  std::cout << "Intel (" << c.estimator.plugin << "): " << e.matched << " relations, translation " << e.translation.mean << " ± "
             << e.translation.std << " m (squared " << e.translation_sq.mean << " m²), rotation " << e.rotation_deg.mean
             << " ± " << e.rotation_deg.std << " deg (squared " << e.rotation_sq_deg.mean << " deg²)\n";
   EXPECT_EQ(e.matched, 90u);
-  EXPECT_LE(e.translation.mean, 0.10);
+  EXPECT_LE(e.translation.mean, target) << c.estimator.plugin;
 }
 
 // Issue 18: a log that records its laser 0.22 m ahead of the robot (the

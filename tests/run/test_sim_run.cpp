@@ -227,6 +227,33 @@ TEST_F(SimRun, TheCommandLineExitsWith143OnSigtermAndWritesTheOutputs) {
   EXPECT_FALSE(std::filesystem::exists(out_ / "trajectory.partial.tum"));
 }
 
+// `--estimator`: one flag switches the estimator; the YAML's estimator
+// options stay only for the same plugin, another gets its own defaults, and a
+// plugin of another kind is refused with a message naming both kinds.
+TEST_F(SimRun, EstimatorOverrideKeepsEachEstimatorsOwnOptions) {
+  RunConfig c = config();
+  ASSERT_EQ(c.estimator.plugin, "ekf");
+  c.estimator.params.set("observability_constrained", true);
+  RunConfig same = c;
+  override_estimator(same, "ekf", registry_);
+  EXPECT_TRUE(same.estimator.params.get_bool("observability_constrained"));
+  RunConfig other = c;
+  override_estimator(other, "cekf", registry_);
+  EXPECT_EQ(other.estimator.plugin, "cekf");
+  EXPECT_FALSE(other.estimator.params.get_bool("observability_constrained"));  // cekf's own default
+  other.max_steps = 200;
+  const RunResult r = run(other);
+  EXPECT_EQ(r.summary.steps, 200);
+  try {
+    RunConfig wrong = c;
+    override_estimator(wrong, "point", registry_);
+    ADD_FAILURE() << "a feature plugin was accepted as the estimator";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("--estimator point: plugin 'point' is a feature"), std::string::npos)
+        << e.what();
+  }
+}
+
 // Every landmark the robot passed is in the map once, where it truly is.
 TEST_F(SimRun, MapFeaturesMatchTrueLandmarks) {
   const RunConfig c = config();
