@@ -410,7 +410,15 @@ LogContents read_log(const std::filesystem::path& file, const ReaderOptions& opt
     if (tokens.empty() || tokens[0][0] == '#') continue;
     try {
       if (out.format == Format::Table) {
-        out.scans.push_back(parse_table_line(tokens, options));
+        Scan scan = parse_table_line(tokens, options);
+        // Every line of the table is one scan of the same laser: a line with
+        // another number of ranges is cut short or run together, not a scan
+        // of another width spread over the same field of view.
+        if (!out.scans.empty() && scan.ranges.size() != out.scans.front().ranges.size())
+          throw LineError(std::to_string(scan.ranges.size()) + " ranges where the first scan (line " +
+                          std::to_string(out.scans.front().line) + ") has " +
+                          std::to_string(out.scans.front().ranges.size()) + ": a truncated or merged line");
+        out.scans.push_back(std::move(scan));
       } else {
         Fields f(tokens);
         if (tokens[0] == "FLASER") {
@@ -431,6 +439,15 @@ LogContents read_log(const std::filesystem::path& file, const ReaderOptions& opt
         }
       }
       out.scans.back().line = line_no;
+      if (out.scans.size() >= 2) {
+        const Scan& previous = out.scans[out.scans.size() - 2];
+        if (out.scans.back().t < previous.t) {
+          const std::string t = std::to_string(out.scans.back().t), t0 = std::to_string(previous.t);
+          out.scans.pop_back();
+          throw LineError("time stamp " + t + " s is before the previous scan's " + t0 + " s (line " +
+                          std::to_string(previous.line) + "): time goes backwards");
+        }
+      }
     } catch (const LineError& e) {
       const std::string problem = file.string() + ":" + std::to_string(line_no) + ": " + e.what();
       if (!options.skip_malformed) throw std::runtime_error(problem);

@@ -123,6 +123,43 @@ TEST(CarmenLog, MalformedLineIsAnErrorOrACountedSkip) {
   EXPECT_THROW(CarmenLogSource{args_for(truncated)}, std::runtime_error);
 }
 
+// Issue 11: a table line cut short (13 ranges instead of 180) was read as a
+// 13-beam scan over 180°; and a time stamp going backwards was taken as is.
+// Both are errors naming file and line, or counted skips.
+TEST(CarmenLog, TruncatedTableLinesAndTimeGoingBackwardsAreNamed) {
+  const std::string first = "1.0 0 0 0 0 0 0 " + ranges(180, "2.0") + "\n";
+  const std::string cut = "2.0 0 0 0 0 0 0 " + ranges(13, "2.0") + "\n";
+  const std::string later = "3.0 0 0 0 0 0 0 " + ranges(180, "2.0") + "\n";
+  const auto file = write_temp("mspace_test_cut_table.txt", "# table\n" + first + cut + later);
+  try {
+    CarmenLogSource source(args_for(file));
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("mspace_test_cut_table.txt:3: 13 ranges where the first scan (line 2) has "
+                                         "180: a truncated or merged line"),
+              std::string::npos)
+        << e.what();
+  }
+  CarmenLogSource skipping(args_for(file, "skip"));
+  EXPECT_EQ(skipping.contents().skipped, 1u);
+  EXPECT_EQ(skipping.size_hint(), 2u);
+
+  const std::string earlier = "0.5 0 0 0 0 0 0 " + ranges(180, "2.0") + "\n";
+  const auto backwards = write_temp("mspace_test_backwards_table.txt", first + later + earlier);
+  try {
+    CarmenLogSource source(args_for(backwards));
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("mspace_test_backwards_table.txt:3: time stamp 0.500000 s is before the "
+                                         "previous scan's 3.000000 s (line 2): time goes backwards"),
+              std::string::npos)
+        << e.what();
+  }
+  CarmenLogSource skipping_backwards(args_for(backwards, "skip"));
+  EXPECT_EQ(skipping_backwards.contents().skipped, 1u);
+  EXPECT_EQ(skipping_backwards.size_hint(), 2u);
+}
+
 TEST(CarmenLog, IntelTable) {
   const std::filesystem::path file =
       std::filesystem::path(MSPACE_SOURCE_DIR) / "../shared/datasets/intel_lab/intel_910_scans.txt";
