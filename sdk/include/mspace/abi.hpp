@@ -12,7 +12,9 @@
 
 // The major version changes with every change of the plugin interfaces'
 // layout (2: DataSource::recorded_mounts; 3: SavedFeature::arrays and
-// SavedFeature::version, the dense information of map files).
+// SavedFeature::version, the dense information of map files; and
+// FeatureType::sample_observation, a new virtual function, so that the
+// conformance suite can drive extensions that need a moving sensor).
 #define MSPACE_SDK_VERSION_MAJOR 3
 #define MSPACE_SDK_VERSION_MINOR 0
 
