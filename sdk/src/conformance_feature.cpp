@@ -567,13 +567,15 @@ Fed feed_until_extension(const FeatureType& type, int dim, std::uint64_t seed, c
     fed.extend_micros = micros_since(start);
   }
   if (fed.extension) {
-    fed.cost.function = "extend";
+    fed.cost.function = "extend from dim " + std::to_string(dim);
     fed.cost.micros = fed.extend_micros;
     fed.cost.calls = 1;
     std::vector<NumericJacobian> parts{NumericJacobian::sensor};
     if (dim > 0) parts.push_back(NumericJacobian::own);
     split_numeric(parts, fed.cost);
-    if (numeric_usage(NumericJacobian::measurement).calls > 0) fed.cost.numeric.push_back("J_measurement");
+    const NumericUsage v = numeric_usage(NumericJacobian::measurement);
+    if (v.calls > 0) fed.cost.numeric.push_back("J_measurement");
+    fed.cost.evaluations += static_cast<double>(v.evaluations);
   }
   reset_numeric_usage();
   return fed;

@@ -133,7 +133,7 @@ TEST(Conformance, CostsSayWhatIsAnalytic) {
   EXPECT_EQ(inn.analytic, (std::vector<std::string>{"J_eta_o", "J_eta_v"}));
   EXPECT_GT(inn.micros, 0.0);
   EXPECT_GT(inn.micros_by_differences, inn.micros);
-  EXPECT_EQ(r.costs[1].function, "extend");
+  EXPECT_EQ(r.costs[1].function, "extend from dim 0");
   EXPECT_EQ(r.costs[1].analytic, (std::vector<std::string>{"J_sensor"}));
 }
 

@@ -49,11 +49,11 @@ struct CheckResult {
 /// What one function of a feature type costs per call, and which of its
 /// Jacobians come from the SDK's numeric helpers (mspace/numeric.hpp).
 struct Cost {
-  std::string function;             ///< "innovation" or "extend"
+  std::string function;             ///< "innovation" or "extend from dim D"
   std::vector<std::string> numeric;   ///< Jacobians filled by central differences (numeric_usage())
   std::vector<std::string> analytic;  ///< the others the function returns
   double micros = 0.0;              ///< measured time per call (µs), mean over the samples
-  double evaluations = 0.0;         ///< function evaluations of the numeric helpers per call
+  double evaluations = 0.0;         ///< function evaluations of the numeric helpers per call (J_measurement included)
   /// innovation only: the time per call of J_ηo and J_ηv by central
   /// differences through innovation() itself (2(n + m) + 1 calls) — what
   /// switching every Jacobian to numeric would cost at most; NaN if not measured.
