@@ -26,7 +26,7 @@ constexpr double kConditionTol = 1e8;   ///< condition number of B̃
 constexpr double kRoundTripTol = 1e-12;
 constexpr double kSymmetryTol = 1e-6;   ///< |∂η/∂x_f · d| along a declared symmetry
 constexpr double kConsistencyTol = 100; ///< NIS of the sample's own measurement
-constexpr int kMaxFeeds = 50;           ///< identical observations fed before an extension is missing
+constexpr int kMaxFeeds = 50;           ///< observations fed before an extension counts as missing
 /// C_new against Σ_k J_v,k C_v J_v,kᵀ, and the gating covariance against its
 /// first-order propagation: largest |λ − 1| of the generalised eigenvalues.
 constexpr double kCovarianceTol = 1e-3;

@@ -5,8 +5,12 @@
 #include <sstream>
 #include <string>
 
+#include <cmath>
+#include <numbers>
+
 #include "check.hpp"
 #include "mspace/conformance.hpp"
+#include "mspace/numeric.hpp"
 #include "plugin_registry.hpp"
 
 namespace {
@@ -145,6 +149,87 @@ TEST(Conformance, JunitListsEveryCheckAndFailure) {
                            "\" failures=\"1\""),
             std::string::npos);
   EXPECT_NE(xml.str().find("name=\"feature.B_Bdual_identity\"><failure"), std::string::npos);
+}
+
+// ---------------------------------------------------------------- numeric helpers
+
+// f(x) = (x0² x1, sin x1 / x0): central differences with a relative step
+// match the analytic Jacobian to ~1e-9 even at x0 = 1e3.
+TEST(NumericJacobian, MatchesTheAnalyticJacobianAtEveryScale) {
+  for (double scale : {1e-3, 1.0, 1e3}) {
+    const Eigen::Vector2d x(scale, 0.7);
+    const mspace::NumericFunction f = [](const Eigen::VectorXd& y, Eigen::VectorXd& out) {
+      out = Eigen::Vector2d(y[0] * y[0] * y[1], std::sin(y[1]) / y[0]);
+      return true;
+    };
+    Eigen::Matrix2d analytic;
+    analytic << 2 * x[0] * x[1], x[0] * x[0], -std::sin(x[1]) / (x[0] * x[0]), std::cos(x[1]) / x[0];
+    mspace::NumericOptions o;
+    o.scale = x.cwiseAbs();
+    const Eigen::MatrixXd J = mspace::numeric_jacobian(mspace::NumericJacobian::other, f, x, o);
+    for (int i = 0; i < 2; ++i)
+      EXPECT_LT((J.row(i) - analytic.row(i)).cwiseAbs().maxCoeff(), 1e-8 * analytic.row(i).cwiseAbs().maxCoeff())
+          << "scale " << scale << " row " << i;
+  }
+}
+
+// A bearing residual at ±π: without angle_rows the jump of 2π gives a slope
+// of ~5e5; with it, the true slope −1.
+TEST(NumericJacobian, AngleRowsAreDifferencedWrapped) {
+  const mspace::Residual bearing = [](const Eigen::VectorXd& x_o, const Eigen::VectorXd& v, Eigen::VectorXd& eta) {
+    eta = Eigen::VectorXd::Constant(1, mspace::wrap_angle(std::atan2(x_o[1], x_o[0]) - v[0]));
+    return true;
+  };
+  const Eigen::Vector2d x_o(1.0, 0.0);
+  const Eigen::VectorXd v = Eigen::VectorXd::Constant(1, std::numbers::pi);
+  mspace::Innovation wrapped, raw;
+  mspace::NumericOptions o;
+  o.angle_rows = {0};
+  ASSERT_TRUE(mspace::numeric_innovation(bearing, x_o, v, wrapped, mspace::kNumericBoth, o));
+  ASSERT_TRUE(mspace::numeric_innovation(bearing, x_o, v, raw));
+  EXPECT_NEAR(wrapped.J_eta_v(0, 0), -1.0, 1e-8);
+  EXPECT_NEAR(wrapped.J_eta_o(0, 1), 1.0, 1e-8);  // ∂atan2(y, x)/∂y = x/r² = 1
+  EXPECT_GT(std::abs(raw.J_eta_v(0, 0)), 1e4);
+}
+
+// Only the requested Jacobians are differenced, and the usage is recorded.
+TEST(NumericJacobian, RecordsWhatItComputed) {
+  const mspace::Residual r = [](const Eigen::VectorXd& x_o, const Eigen::VectorXd& v, Eigen::VectorXd& eta) {
+    eta = x_o.head(2) - v;
+    return true;
+  };
+  mspace::reset_numeric_usage();
+  mspace::Innovation inn;
+  inn.J_eta_v = -Eigen::MatrixXd::Identity(2, 2);
+  ASSERT_TRUE(mspace::numeric_innovation(r, Eigen::Vector3d(1, 2, 3), Eigen::Vector2d(0.5, 0.5), inn,
+                                         mspace::kNumericEtaO));
+  EXPECT_EQ(inn.J_eta_o.rows(), 2);
+  EXPECT_EQ(inn.J_eta_o.cols(), 3);
+  EXPECT_NEAR(inn.J_eta_o(1, 1), 1.0, 1e-9);
+  EXPECT_NEAR(inn.J_eta_o(0, 2), 0.0, 1e-12);
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_o).calls, 1);
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_o).evaluations, 1 + 2 * 3);
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_v).calls, 0);
+  mspace::reset_numeric_usage();
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_o).calls, 0);
+}
+
+// Where one side cannot be evaluated, the one-sided difference is used;
+// where neither can, an exception says so.
+TEST(NumericJacobian, FallsBackToOneSidedDifferences) {
+  const mspace::NumericFunction sqrt_f = [](const Eigen::VectorXd& x, Eigen::VectorXd& out) {
+    if (x[0] < 1.0) return false;
+    out = Eigen::VectorXd::Constant(1, std::sqrt(x[0]));
+    return true;
+  };
+  const Eigen::MatrixXd J = mspace::numeric_jacobian(mspace::NumericJacobian::other, sqrt_f, Eigen::VectorXd::Ones(1));
+  EXPECT_NEAR(J(0, 0), 0.5, 1e-5);
+  const mspace::NumericFunction only_at_one = [](const Eigen::VectorXd& x, Eigen::VectorXd& out) {
+    out = x;
+    return x[0] == 1.0;
+  };
+  EXPECT_THROW(mspace::numeric_jacobian(mspace::NumericJacobian::other, only_at_one, Eigen::VectorXd::Ones(1)),
+               std::runtime_error);
 }
 
 TEST(Conformance, PluginNameOfFile) {
