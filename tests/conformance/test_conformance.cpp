@@ -130,7 +130,7 @@ TEST(Conformance, SmallJacobiansAreComparedRelativeToTheirSize) {
 
 TEST(Conformance, CostsSayWhatIsAnalytic) {
   const conformance::Report r = check("point", MSPACE_PLUGIN_DIR);
-  ASSERT_EQ(r.costs.size(), 2u);
+  ASSERT_GE(r.costs.size(), 2u);  // innovation, then one "extend from dim D" per dimension that extends
   const conformance::Cost& inn = r.costs[0];
   EXPECT_EQ(inn.function, "innovation");
   EXPECT_TRUE(inn.numeric.empty());
