@@ -516,6 +516,22 @@ std::optional<FeatureSample> HLineType::sample(int dim, std::uint64_t seed) cons
   return out;
 }
 
+std::optional<SampleObservation> HLineType::sample_observation(int dim, std::uint64_t seed, int k) const {
+  std::optional<FeatureSample> s = sample(dim, seed);
+  if (!s) return std::nullopt;
+  const Vec6 x_f = s->feature->coords();
+  const Vec2 t = (x_f.segment<2>(3) - x_f.head<2>()).normalized();
+  const double step = 0.13 * (k - 1);  // never exactly at min_baseline
+  SampleObservation o;
+  o.x_ms = s->x_ms;
+  o.x_ms.head<2>() += step * normal_of(t);
+  o.path_distance = step;
+  o.measurement = s->measurement;
+  o.measurement.v = project_line(x_f, o.x_ms, 500.0);
+  o.measurement.C_v = endpoint_covariance(o.measurement.v, 1.0, 5.0, 1.0);
+  return o;
+}
+
 std::unique_ptr<Feature> HLineType::restore(const SavedFeature& saved) const {
   if (saved.coords.size() != 6 || saved.extra.size() != 2)
     throw std::invalid_argument("hline: saved state must hold 6 coordinates and the anchor (x, y) (got " +

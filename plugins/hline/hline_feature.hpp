@@ -194,6 +194,9 @@ class HLineType : public FeatureType {
   /// A line 1–3 m long, 1.5–2.5 m above a slightly tilted camera near it,
   /// and its noise-free measurement (f = 500 px, the extractor's C_v).
   std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const override;
+  /// The sample's line seen by a camera moving along the line's horizontal
+  /// normal, 0.13 m per observation (the baseline that dim 1 → 3 needs).
+  std::optional<SampleObservation> sample_observation(int dim, std::uint64_t seed, int k) const override;
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
 
   const HLineConfig& config() const { return config_; }

@@ -637,6 +637,14 @@ std::optional<FeatureSample> WallType::sample(int dim, std::uint64_t seed) const
   return out;
 }
 
+std::optional<SampleObservation> WallType::sample_observation(int dim, std::uint64_t seed, int /*k*/) const {
+  std::optional<FeatureSample> s = sample(dim, seed);
+  if (!s) return std::nullopt;
+  SampleObservation o{s->x_ms, 0.0, s->measurement};
+  o.measurement.flags = ls::make_flags(ls::EndReason::Depth, ls::EndReason::Depth);
+  return o;
+}
+
 namespace {
 
 /// The dense information of a saved wall (see WallFeature::save).

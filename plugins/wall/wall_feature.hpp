@@ -204,6 +204,10 @@ class WallType : public FeatureType {
   std::vector<std::string> measurement_kinds() const override;
   std::unique_ptr<Feature> create(const Measurement& m, const SensorView& view) override;
   std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const override;
+  /// The sample's line seen again from the same pose, with both ends real
+  /// (the sample's own measurement marks the ends outside the M-space as
+  /// occluded): the ends extend 2 → 3/4 and 3 → 4.
+  std::optional<SampleObservation> sample_observation(int dim, std::uint64_t seed, int k) const override;
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
 
   const WallConfig& config() const { return config_; }

@@ -59,8 +59,14 @@ void Recorder::add(const std::string& name, double value, double tolerance, bool
   }
 }
 
-void Recorder::at_most(const std::string& name, double value, double tolerance, const std::string& note) {
+void Recorder::at_most(const std::string& name, double value, double tolerance, const std::string& note,
+                       bool always_show_note) {
   add(name, value, tolerance, true, note);
+  if (always_show_note) {
+    CheckResult* c = find(name);
+    c->note = note;
+    c->show_note = true;
+  }
 }
 
 void Recorder::at_least(const std::string& name, double value, double tolerance, const std::string& note) {
@@ -69,6 +75,33 @@ void Recorder::at_least(const std::string& name, double value, double tolerance,
 
 void Recorder::fail(const std::string& name, const std::string& note) {
   add(name, std::numeric_limits<double>::quiet_NaN(), 0.0, true, note);
+}
+
+void Recorder::cost(const Cost& c) {
+  auto merge = [](std::vector<std::string>& into, const std::vector<std::string>& names) {
+    for (const std::string& n : names)
+      if (std::find(into.begin(), into.end(), n) == into.end()) into.push_back(n);
+  };
+  auto it = std::find_if(costs_.begin(), costs_.end(), [&](const Cost& x) { return x.function == c.function; });
+  if (it == costs_.end()) {
+    costs_.push_back(c);
+    return;
+  }
+  const double n0 = it->calls, n1 = c.calls, n = std::max(1.0, n0 + n1);
+  it->micros = (it->micros * n0 + c.micros * n1) / n;
+  it->evaluations = (it->evaluations * n0 + c.evaluations * n1) / n;
+  if (std::isnan(it->micros_by_differences)) {
+    it->micros_by_differences = c.micros_by_differences;
+  } else if (!std::isnan(c.micros_by_differences)) {
+    it->micros_by_differences = (it->micros_by_differences * n0 + c.micros_by_differences * n1) / n;
+  }
+  it->calls += c.calls;
+  merge(it->numeric, c.numeric);
+  merge(it->analytic, c.analytic);
+  // A Jacobian numeric in one call and analytic in another is listed as numeric.
+  std::erase_if(it->analytic, [&](const std::string& a) {
+    return std::find(it->numeric.begin(), it->numeric.end(), a) != it->numeric.end();
+  });
 }
 
 void Recorder::skip(const std::string& name, const std::string& note) {
@@ -112,7 +145,33 @@ double relative_error(const Eigen::MatrixXd& analytic, const Eigen::MatrixXd& nu
     return std::numeric_limits<double>::infinity();
   if (analytic.size() == 0) return 0.0;
   if (!analytic.allFinite() || !numeric.allFinite()) return std::numeric_limits<double>::quiet_NaN();
-  return (analytic - numeric).cwiseAbs().maxCoeff() / std::max(1.0, numeric.cwiseAbs().maxCoeff());
+  double worst = 0.0;
+  for (Eigen::Index i = 0; i < analytic.rows(); ++i) {
+    const double size = std::max({analytic.row(i).cwiseAbs().maxCoeff(), numeric.row(i).cwiseAbs().maxCoeff(), kRowFloor});
+    worst = std::max(worst, (analytic.row(i) - numeric.row(i)).cwiseAbs().maxCoeff() / size);
+  }
+  return worst;
+}
+
+double covariance_mismatch(const Eigen::MatrixXd& C, const Eigen::MatrixXd& E) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  if (C.rows() != E.rows() || C.cols() != E.cols() || C.rows() != C.cols()) return kInf;
+  if (C.size() == 0) return 0.0;
+  if (!C.allFinite() || !E.allFinite()) return kInf;
+  const Eigen::MatrixXd Es = 0.5 * (E + E.transpose()), Cs = 0.5 * (C + C.transpose());
+  const Eigen::VectorXd eig_E = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Es, Eigen::EigenvaluesOnly).eigenvalues();
+  const double e_max = eig_E.cwiseAbs().maxCoeff();
+  if (e_max > 0 && eig_E.minCoeff() > 1e-12 * e_max) {
+    const Eigen::LLT<Eigen::MatrixXd> llt(Es);
+    const Eigen::MatrixXd L_inv = llt.matrixL().solve(Eigen::MatrixXd::Identity(E.rows(), E.cols()));
+    const Eigen::MatrixXd M = L_inv * Cs * L_inv.transpose();
+    const Eigen::VectorXd lambda =
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(0.5 * (M + M.transpose()), Eigen::EigenvaluesOnly).eigenvalues();
+    if (lambda.minCoeff() <= 0) return kInf;
+    return std::max({lambda.maxCoeff() - 1.0, 1.0 / lambda.minCoeff() - 1.0, 1.0 - lambda.minCoeff(),
+                     1.0 - 1.0 / lambda.maxCoeff()});
+  }
+  return (Cs - Es).cwiseAbs().maxCoeff() / std::max(e_max, 1e-300);
 }
 
 double spd_ratio(const Eigen::MatrixXd& m) {
@@ -239,6 +298,7 @@ Report check_plugin(const PluginDescriptor& descriptor, const Options& options) 
     });
   }
   report.checks = r.take();
+  report.costs = r.take_costs();
   return report;
 }
 
@@ -266,6 +326,24 @@ std::string xml_escape(const std::string& text) {
   return out;
 }
 
+std::string join(const std::vector<std::string>& names) {
+  std::string out;
+  for (const std::string& n : names) out += (out.empty() ? "" : " ") + n;
+  return out;
+}
+
+/// "0.21 us/call, analytic J_eta_o J_eta_v; by differences through innovation(): 3.4 us/call (16x)".
+std::string describe_cost(const Cost& c) {
+  std::string text = format_number(c.micros) + " us/call";
+  if (!c.numeric.empty())
+    text += ", numeric " + join(c.numeric) + " (" + format_number(c.evaluations) + " evaluations/call)";
+  if (!c.analytic.empty()) text += ", analytic " + join(c.analytic);
+  if (!std::isnan(c.micros_by_differences) && c.micros > 0)
+    text += "; by differences through " + c.function + "(): " + format_number(c.micros_by_differences) +
+            " us/call (" + format_number(c.micros_by_differences / c.micros) + "x)";
+  return text;
+}
+
 }  // namespace
 
 void print_report(const Report& report, std::ostream& out) {
@@ -276,9 +354,11 @@ void print_report(const Report& report, std::ostream& out) {
       out << " worst " << std::setw(10) << format_number(c.worst) << " tol " << (c.lower_is_better ? "<= " : ">= ")
           << std::setw(8) << format_number(c.tolerance);
     }
-    if (!c.note.empty() && (c.skipped || !c.passed)) out << "  " << c.note;
+    if (!c.note.empty() && (c.skipped || !c.passed || c.show_note)) out << "  " << c.note;
     out << '\n';
   }
+  for (const Cost& c : report.costs)
+    out << "  COST  " << std::left << std::setw(36) << c.function << " " << describe_cost(c) << '\n';
   out << "  " << (report.passed() ? "passed" : "FAILED") << ": " << report.checks.size() << " checks, "
       << report.failures() << " failed\n";
 }
@@ -289,6 +369,13 @@ void write_junit(const std::vector<Report>& reports, std::ostream& out) {
     const auto skipped = std::count_if(rep.checks.begin(), rep.checks.end(), [](const CheckResult& c) { return c.skipped; });
     out << "  <testsuite name=\"" << xml_escape(rep.plugin) << "\" tests=\"" << rep.checks.size() << "\" failures=\""
         << rep.failures() << "\" skipped=\"" << skipped << "\">\n";
+    if (!rep.costs.empty()) {
+      out << "    <properties>\n";
+      for (const Cost& c : rep.costs)
+        out << "      <property name=\"cost." << xml_escape(c.function) << "\" value=\"" << xml_escape(describe_cost(c))
+            << "\"/>\n";
+      out << "    </properties>\n";
+    }
     for (const CheckResult& c : rep.checks) {
       out << "    <testcase classname=\"mspace.check." << xml_escape(rep.plugin) << "\" name=\"" << xml_escape(c.name)
           << "\">";

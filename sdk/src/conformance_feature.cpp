@@ -5,6 +5,7 @@
 // the SDK transform x_o = T(x_f | x_ms) (eqs. 7–9, 18) with J_of and J_os (eq. 19).
 #include <Eigen/Dense>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -12,6 +13,8 @@
 
 #include "conformance_internal.hpp"
 #include "mspace/feature.hpp"
+#include "mspace/numeric.hpp"
+#include "mspace/pose.hpp"
 #include "mspace/transform.hpp"
 
 namespace mspace::conformance::detail {
@@ -23,7 +26,12 @@ constexpr double kConditionTol = 1e8;   ///< condition number of B̃
 constexpr double kRoundTripTol = 1e-12;
 constexpr double kSymmetryTol = 1e-6;   ///< |∂η/∂x_f · d| along a declared symmetry
 constexpr double kConsistencyTol = 100; ///< NIS of the sample's own measurement
-constexpr int kMaxFeeds = 50;           ///< identical observations fed before giving up on extension
+constexpr int kMaxFeeds = 50;           ///< observations fed before an extension counts as missing
+/// C_new against Σ_k J_v,k C_v J_v,kᵀ, and the gating covariance against its
+/// first-order propagation: largest |λ − 1| of the generalised eigenvalues.
+constexpr double kCovarianceTol = 1e-3;
+constexpr int kTimedCalls = 20;         ///< innovation() calls per timed batch
+constexpr int kTimedBatches = 5;        ///< batches per sample; the fastest counts
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 const Eigen::VectorXd kNoEta;  ///< returned when the innovation is rejected
@@ -107,6 +115,65 @@ bool compute_innovation(Probe& p, Recorder& r) {
   return sizes && finite;
 }
 
+using Clock = std::chrono::steady_clock;
+
+double micros_since(Clock::time_point start) {
+  return std::chrono::duration<double, std::micro>(Clock::now() - start).count();
+}
+
+/// Which Jacobians of `parts` the numeric helpers produced since the last reset.
+void split_numeric(const std::vector<NumericJacobian>& parts, Cost& c) {
+  c.evaluations = 0;
+  for (NumericJacobian j : parts) {
+    const NumericUsage u = numeric_usage(j);
+    (u.calls > 0 ? c.numeric : c.analytic).push_back(numeric_jacobian_name(j));
+    c.evaluations += static_cast<double>(u.evaluations);
+  }
+}
+
+// The cost of innovation() per call, which of J_ηo, J_ηv are numeric, and what
+// central differences through innovation() itself cost (all-numeric bound).
+void record_innovation_cost(const Probe& p, Recorder& r) {
+  const Feature& f = *p.sample.feature;
+  const Measurement& m = p.sample.measurement;
+  Innovation inn;
+  Cost c;
+  c.function = "innovation";
+  // The fastest of several batches: the time of the call itself, not of
+  // whatever else the machine was doing.
+  reset_numeric_usage();
+  c.micros = std::numeric_limits<double>::infinity();
+  for (int batch = 0; batch < kTimedBatches; ++batch) {
+    const Clock::time_point start = Clock::now();
+    for (int i = 0; i < kTimedCalls; ++i) f.innovation(p.x_o, m, inn);
+    c.micros = std::min(c.micros, micros_since(start) / kTimedCalls);
+  }
+  split_numeric({NumericJacobian::eta_o, NumericJacobian::eta_v}, c);
+  c.evaluations /= kTimedCalls * kTimedBatches;
+  c.calls = 1;
+  const Eigen::Index msize = p.inn.eta.size();
+  const auto eta_of_xo = [&](const Eigen::VectorXd& x_o) -> Eigen::VectorXd {
+    if (!f.innovation(x_o, m, inn) || inn.eta.size() != msize) return Eigen::VectorXd::Constant(msize, kNaN);
+    return inn.eta;
+  };
+  const auto eta_of_v = [&](const Eigen::VectorXd& v) -> Eigen::VectorXd {
+    Measurement mv = m;
+    mv.v = v;
+    if (!f.innovation(p.x_o, mv, inn) || inn.eta.size() != msize) return Eigen::VectorXd::Constant(msize, kNaN);
+    return inn.eta;
+  };
+  c.micros_by_differences = std::numeric_limits<double>::infinity();
+  for (int batch = 0; batch < kTimedBatches; ++batch) {
+    const Clock::time_point start = Clock::now();
+    f.innovation(p.x_o, m, inn);
+    numeric_jacobian(eta_of_xo, p.x_o);
+    numeric_jacobian(eta_of_v, m.v);
+    c.micros_by_differences = std::min(c.micros_by_differences, micros_since(start));
+  }
+  reset_numeric_usage();
+  r.cost(c);
+}
+
 // The sample's measurement must agree with the feature: NIS ηᵀ S⁻¹ η with S = J_ηv C_v J_ηvᵀ.
 void check_consistency(const Probe& p, Recorder& r) {
   const Eigen::MatrixXd& Jv = p.inn.J_eta_v;
@@ -166,6 +233,71 @@ void check_jacobians(const Probe& p, Recorder& r) {
   guarded(r, "feature.J_eta_xp", [&] {
     r.at_most("feature.J_eta_xp", relative_error(chain, numeric_jacobian(eta_of_dxp, Eigen::VectorXd::Zero(p.dim))),
               kJacobianTol, "J_ηo·J_of·B̃ (eq. 30) differs from differences of apply_perturbation" + at);
+  });
+}
+
+// The gating covariance G of a new (dim 0) feature stands for the
+// uncertainty of x_f that the creating observation leaves (the kernel adds
+// J_of G J_ofᵀ to the gate, kernel/src/slam.cpp). Seen through the innovation
+// of the same measurement, J_ηf G J_ηfᵀ (J_ηf = J_ηo J_of) must equal the
+// first-order propagation J_ηf (J_fv C_v J_fvᵀ + J_fs C_ms J_fsᵀ) J_ηfᵀ, with
+// J_fv, J_fs differences of x_f after create() + add_dense_information() in
+// v and in x_ms. Directions η does not see (a wall's end points along the
+// wall, a camera point's depth) are not compared.
+void check_gating_covariance(const Probe& p, Recorder& r) {
+  guarded(r, "feature.gating_covariance", [&] {
+    auto& type = const_cast<FeatureType&>(p.type);  // create() is non-const; the object is the suite's own
+    const Measurement& m = p.sample.measurement;
+    Rng rng(p.seed ^ 0x9e3779b97f4a7c15ULL);
+    SensorView view;
+    view.t = 0.1;
+    view.C_ms = random_spd(rng, 6, 1e-5, 1e-3);
+    const std::string at = " (seed " + std::to_string(p.seed) + ")";
+    auto created = [&](const Eigen::VectorXd& v, const Pose6& x_ms) -> std::unique_ptr<Feature> {
+      Measurement mv = m;
+      mv.v = v;
+      view.x_ms = x_ms;
+      std::unique_ptr<Feature> f = type.create(mv, view);
+      if (f) f->add_dense_information(mv, view);
+      return f;
+    };
+    const std::unique_ptr<Feature> f0 = created(m.v, p.sample.x_ms);
+    if (!f0) {
+      r.fail("feature.gating_covariance", "create() refused the sample's own measurement" + at);
+      return;
+    }
+    const int n = p.type.layout().size();
+    const Eigen::MatrixXd C_ms = view.C_ms;
+    auto coords_of_v = [&](const Eigen::VectorXd& v) -> Eigen::VectorXd {
+      const std::unique_ptr<Feature> f = created(v, p.sample.x_ms);
+      return f ? Eigen::VectorXd(f->coords()) : Eigen::VectorXd::Constant(n, kNaN);
+    };
+    auto coords_of_pose = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd {
+      const std::unique_ptr<Feature> f = created(m.v, Pose6(x));
+      return f ? Eigen::VectorXd(f->coords()) : Eigen::VectorXd::Constant(n, kNaN);
+    };
+    const Eigen::MatrixXd J_fv = numeric_jacobian(coords_of_v, m.v);
+    const Eigen::MatrixXd J_fs = numeric_jacobian(coords_of_pose, p.sample.x_ms);
+    Eigen::MatrixXd J_of;
+    const Eigen::VectorXd x_o = to_sensor_frame(f0->layout(), f0->coords(), p.sample.x_ms, &J_of);
+    Innovation inn;
+    if (!f0->innovation(x_o, m, inn)) {
+      r.fail("feature.gating_covariance", "a feature created from the sample's measurement rejects it" + at);
+      return;
+    }
+    const Eigen::MatrixXd J_eta_f = inn.J_eta_o * J_of;
+    Eigen::MatrixXd G = f0->gating_covariance();
+    if (G.size() == 0) G = Eigen::MatrixXd::Zero(n, n);
+    if (G.rows() != n || G.cols() != n) {
+      r.fail("feature.gating_covariance", "gating_covariance() is not n × n" + at);
+      return;
+    }
+    const Eigen::MatrixXd expected =
+        J_eta_f * (J_fv * m.C_v * J_fv.transpose() + J_fs * C_ms * J_fs.transpose()) * J_eta_f.transpose();
+    r.at_most("feature.gating_covariance", covariance_mismatch(J_eta_f * G * J_eta_f.transpose(), expected),
+              kCovarianceTol,
+              "J_ηf G J_ηfᵀ of a new feature differs from J_ηf (J_fv C_v J_fvᵀ + J_fs C_ms J_fsᵀ) J_ηfᵀ "
+              "(largest |λ − 1| shown)" + at);
   });
 }
 
@@ -384,27 +516,68 @@ void check_wrong_sizes(const Probe& p, Recorder& r) {
 struct Fed {
   std::unique_ptr<Feature> feature;
   std::optional<Extension> extension;
-  int feeds = 0;
+  int feeds = 0;            ///< observations fed, the extending one included
+  Measurement measurement;  ///< the sample's measurement (unperturbed)
+  std::vector<Eigen::MatrixXd> C_v;  ///< of each fed measurement
+  double extend_micros = 0; ///< time of the extend() call that extended
+  Cost cost;                ///< of that call: which Jacobians were numeric
 };
 
-/// Samples (dim, seed), perturbs its M-space by dx_old (eq. 24) and feeds its
-/// own measurement, seen from x_ms + dpose at increasing times, calling
+/// A perturbation of one component of the measurement of one feed.
+struct FeedPerturbation {
+  int feed = 0;  ///< 1-based; 0: none
+  int component = 0;
+  double h = 0.0;
+};
+
+/// Samples (dim, seed), perturbs its M-space by dx_old (eq. 24) and feeds
+/// observations k = 1, 2, … (FeatureType::sample_observation, else the
+/// sample's own measurement from its own pose) at increasing times, calling
 /// extend() after each until it extends (phase 3 then phase 4 of the loop).
+/// `dpose` moves the sensor pose of feed `anchor` by dpose and every other
+/// view rigidly with it (x_k' = (x_a + dpose) ⊕ (⊖x_a ⊕ x_k)).
 Fed feed_until_extension(const FeatureType& type, int dim, std::uint64_t seed, const Pose6& dpose,
-                         const Eigen::VectorXd& dx_old) {
+                         const Eigen::VectorXd& dx_old, const FeedPerturbation& dv = {}, int anchor = 1) {
   FeatureSample s = *type.sample(dim, seed);
   Fed fed;
   fed.feature = std::move(s.feature);
+  fed.measurement = s.measurement;
   if (dx_old.size() > 0) fed.feature->apply_perturbation(dx_old);
+  auto observation = [&](int k) {
+    std::optional<SampleObservation> o = type.sample_observation(dim, seed, k);
+    if (!o) o = SampleObservation{s.x_ms, 0.0, s.measurement};
+    return *o;
+  };
+  const bool moving = type.sample_observation(dim, seed, 1).has_value();
+  const Pose6 x_anchor = moving ? observation(anchor).x_ms : s.x_ms;
   SensorView view;
-  view.x_ms = s.x_ms + dpose;
   view.C_ms = Mat6::Identity() * 1e-6;
-  for (fed.feeds = 1; fed.feeds <= kMaxFeeds && !fed.extension; ++fed.feeds) {
-    view.t = 0.1 * fed.feeds;
-    view.path_distance = 0.0;
-    fed.feature->add_dense_information(s.measurement, view);
+  for (int k = 1; k <= kMaxFeeds && !fed.extension; ++k) {
+    fed.feeds = k;
+    SampleObservation o = observation(k);
+    view.t = 0.1 * k;
+    view.path_distance = o.path_distance;
+    view.x_ms = moving ? compound(x_anchor + dpose, relative(x_anchor, o.x_ms)) : Pose6(o.x_ms + dpose);
+    if (dv.feed == k && dv.component < o.measurement.v.size()) o.measurement.v[dv.component] += dv.h;
+    fed.C_v.push_back(o.measurement.C_v);
+    fed.feature->add_dense_information(o.measurement, view);
+    reset_numeric_usage();
+    const Clock::time_point start = Clock::now();
     fed.extension = fed.feature->extend(view);
+    fed.extend_micros = micros_since(start);
   }
+  if (fed.extension) {
+    fed.cost.function = "extend from dim " + std::to_string(dim);
+    fed.cost.micros = fed.extend_micros;
+    fed.cost.calls = 1;
+    std::vector<NumericJacobian> parts{NumericJacobian::sensor};
+    if (dim > 0) parts.push_back(NumericJacobian::own);
+    split_numeric(parts, fed.cost);
+    const NumericUsage v = numeric_usage(NumericJacobian::measurement);
+    if (v.calls > 0) fed.cost.numeric.push_back("J_measurement");
+    fed.cost.evaluations += static_cast<double>(v.evaluations);
+  }
+  reset_numeric_usage();
   return fed;
 }
 
@@ -434,6 +607,12 @@ void check_extension_shape(const FeatureType& type, int dim, const Fed& fed, Rec
   check_duality(f, r);
 }
 
+/// Whether a perturbed run extended at the same feed to the same dimension.
+bool same_extension(const Fed& nominal, const Fed& run, int dim) {
+  return run.extension && run.feeds == nominal.feeds && run.extension->new_dims == nominal.extension->new_dims &&
+         run.feature->mspace_dim() == dim + nominal.extension->new_dims;
+}
+
 /// Numeric ∂(new M-space coordinates)/∂(input) where `perturbed(j, ±h)` feeds a
 /// perturbed run: the new coordinates are the last rows of B applied to Δx_f.
 Eigen::MatrixXd extension_jacobian(const Fed& nominal, int dim, int inputs,
@@ -443,9 +622,8 @@ Eigen::MatrixXd extension_jacobian(const Fed& nominal, int dim, int inputs,
   Eigen::MatrixXd J(e.new_dims, inputs);
   for (int j = 0; j < inputs; ++j) {
     const Fed plus = perturbed(j, kStep), minus = perturbed(j, -kStep);
-    const bool same = plus.extension && minus.extension && plus.feeds == nominal.feeds && minus.feeds == nominal.feeds &&
-                      plus.feature->mspace_dim() == dim + e.new_dims && minus.feature->mspace_dim() == dim + e.new_dims;
-    if (!same) return Eigen::MatrixXd::Constant(e.new_dims, inputs, kNaN);
+    if (!same_extension(nominal, plus, dim) || !same_extension(nominal, minus, dim))
+      return Eigen::MatrixXd::Constant(e.new_dims, inputs, kNaN);
     J.col(j) = B_new * (plus.feature->coords() - minus.feature->coords()) / (2.0 * kStep);
   }
   return J;
@@ -459,10 +637,11 @@ void check_extension_jacobians(const FeatureType& type, int dim, std::uint64_t s
   const Eigen::MatrixXd numeric_sensor = extension_jacobian(nominal, dim, 6, [&](int j, double h) {
     Pose6 d = Pose6::Zero();
     d[j] = h;
-    return feed_until_extension(type, dim, seed, d, no_dx);
+    return feed_until_extension(type, dim, seed, d, no_dx, {}, nominal.feeds);
   });
   r.at_most("feature.extension_J_sensor", relative_error(J_sensor, numeric_sensor), kJacobianTol,
-            "J_sensor differs from differences of the extended coordinates in x_ms" + at);
+            "J_sensor differs from B_new·(x_f(x_ms + h e_j) − x_f(x_ms − h e_j))/2h, x_f after the extending "
+            "feed, B_new the new rows of B" + at);
   if (dim == 0) return;
   const Eigen::MatrixXd J_own = e.J_own.size() == 0 ? Eigen::MatrixXd::Zero(e.new_dims, dim) : e.J_own;
   const Eigen::MatrixXd numeric_own = extension_jacobian(nominal, dim, dim, [&](int j, double h) {
@@ -471,20 +650,51 @@ void check_extension_jacobians(const FeatureType& type, int dim, std::uint64_t s
     return feed_until_extension(type, dim, seed, Pose6::Zero(), dx);
   });
   r.at_most("feature.extension_J_own", relative_error(J_own, numeric_own), kJacobianTol,
-            "J_own differs from differences of the extended coordinates in δx_p,old" + at);
+            "J_own differs from B_new·(x_f(+h) − x_f(−h))/2h with δx_p,old = ±h e_j applied before the feeds" + at);
 }
 
-void check_extension(const FeatureType& type, int dim, std::uint64_t seed, Recorder& r) {
-  guarded(r, "feature.extension", [&] {
-    Fed nominal = feed_until_extension(type, dim, seed, Pose6::Zero(), Eigen::VectorXd::Zero(dim));
-    if (!nominal.extension) {
-      r.skip("feature.extension_sizes", "no extension after " + std::to_string(kMaxFeeds) +
-                                            " identical observations from dim " + std::to_string(dim));
+// C_new is the covariance of w in δx_p,new = J_sensor δx_ms + J_own δx_p,old + w:
+// what the measurements' noise puts into the new coordinates. Every fed
+// observation k moves them by J_v,k δv_k, so C_new ≈ Σ_k J_v,k C_v J_v,kᵀ.
+void check_extension_C_new(const FeatureType& type, int dim, std::uint64_t seed, const Fed& nominal, Recorder& r) {
+  const Extension& e = *nominal.extension;
+  const std::string at = " (from dim " + std::to_string(dim) + ", seed " + std::to_string(seed) + ")";
+  const auto m = static_cast<int>(nominal.measurement.v.size());  // every observation's v has this size
+  Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(e.new_dims, e.new_dims);
+  const Eigen::VectorXd no_dx = Eigen::VectorXd::Zero(dim);
+  for (int k = 1; k <= nominal.feeds; ++k) {
+    const Eigen::MatrixXd J_v = extension_jacobian(nominal, dim, m, [&](int j, double h) {
+      return feed_until_extension(type, dim, seed, Pose6::Zero(), no_dx, FeedPerturbation{k, j, h});
+    });
+    if (!J_v.allFinite()) {
+      r.fail("feature.extension_C_new", "a perturbed measurement changed when or how the feature extends" + at);
       return;
     }
+    const Eigen::MatrixXd& C_v = nominal.C_v[static_cast<std::size_t>(k - 1)];
+    if (C_v.rows() != m || C_v.cols() != m) {
+      r.fail("feature.extension_C_new", "an observation's C_v does not fit its v" + at);
+      return;
+    }
+    expected += J_v * C_v * J_v.transpose();
+  }
+  r.at_most("feature.extension_C_new", covariance_mismatch(e.C_new, expected), kCovarianceTol,
+            "C_new differs from Σ_k J_v,k C_v J_v,kᵀ (J_v,k: differences of the new coordinates in the k-th "
+            "observation's v; largest |λ − 1| shown)" + at);
+}
+
+/// Returns whether the sample extended.
+bool check_extension(const FeatureType& type, int dim, std::uint64_t seed, Recorder& r) {
+  bool extended = false;
+  guarded(r, "feature.extension", [&] {
+    Fed nominal = feed_until_extension(type, dim, seed, Pose6::Zero(), Eigen::VectorXd::Zero(dim));
+    extended = nominal.extension.has_value();
+    if (!nominal.extension) return;
+    r.cost(nominal.cost);
     check_extension_shape(type, dim, nominal, r);
     check_extension_jacobians(type, dim, seed, nominal, r);
+    check_extension_C_new(type, dim, seed, nominal, r);
   });
+  return extended;
 }
 
 void check_reachable_dims(const FeatureType& type, Recorder& r) {
@@ -509,7 +719,9 @@ void check_sample(const FeatureType& type, int dim, std::uint64_t seed, Recorder
   check_duality(*p.sample.feature, r);
   if (!compute_innovation(p, r)) return;
   check_consistency(p, r);
+  record_innovation_cost(p, r);
   check_jacobians(p, r);
+  if (dim == 0) check_gating_covariance(p, r);
   check_symmetries(p, r);
   check_round_trip(p, r);
   check_round_trip_future(p, r);
@@ -529,13 +741,27 @@ void check_feature_type(PluginObject& object, const Options& options, Recorder& 
     return;
   }
   const std::vector<int> dims = type.reachable_dims();
+  // A dimension below the largest from which no sample extends would leave
+  // every extension check vacuous for it: that is a failure, not a skip.
+  int never = 0;
+  std::string counts;
   for (int dim : dims) {
+    int extended = 0;
     for (int s = 0; s < options.samples; ++s) {
       const std::uint64_t seed = options.seed * 7919 + static_cast<std::uint64_t>(dim) * 1000 + s;
       guarded(r, "feature.sample", [&] { check_sample(type, dim, seed, r); });
-      if (dim != dims.back()) check_extension(type, dim, seed, r);
+      if (dim != dims.back() && check_extension(type, dim, seed, r)) ++extended;
     }
+    if (dim == dims.back()) continue;
+    never += extended == 0 ? 1 : 0;
+    counts += (counts.empty() ? "" : ", ") + std::string("from dim ") + std::to_string(dim) + ": " +
+              std::to_string(extended) + "/" + std::to_string(options.samples);
   }
+  if (dims.size() > 1)
+    r.at_most("feature.extension_reached", never, 0,
+              "samples that extended within " + std::to_string(kMaxFeeds) + " observations " + counts +
+                  " (every dimension below the largest must extend for some sample)",
+              /*always_show_note=*/true);
 }
 
 }  // namespace mspace::conformance::detail

@@ -1,7 +1,8 @@
 # install_and_example.cmake — run by CTest (test `install_and_example`):
 #   1. installs the build tree BUILD_DIR into a fresh prefix under WORK_DIR;
 #   2. configures and builds sdk/examples/doorway against that prefix only;
-#   3. checks the example's plugins with the installed `mspace check`;
+#   3. checks the example's plugins with the installed `mspace check` (the
+#      doorway also with its numeric Jacobians, mspace/numeric.hpp);
 #   4. runs the example's YAML through the installed, unchanged `mspace`
 #      (its SHA-256 is compared before and after), the example's plugins
 #      found through MSPACE_PLUGIN_PATH and the installed ones without it;
@@ -52,6 +53,8 @@ set(plugins ${example_build}/plugins)
 step("check example plugins" ${clean_env} ${mspace} check
      ${plugins}/libmspace-plugin-doorway.so ${plugins}/libmspace-plugin-doorway_jambs.so
      ${plugins}/libmspace-plugin-doorway_sim.so --junit ${WORK_DIR}/check_doorway.xml)
+step("check the doorway with numeric Jacobians" ${clean_env} ${mspace} check
+     ${plugins}/libmspace-plugin-doorway.so --param jacobians=numeric --junit ${WORK_DIR}/check_doorway_numeric.xml)
 step("run example" ${clean_env} MSPACE_PLUGIN_PATH=${plugins}
      ${mspace} run ${example_src}/doorway.yaml --out ${WORK_DIR}/out --quiet)
 step("compare with ground truth" ${example_build}/doorway_check_map ${example_src}/doorway.yaml ${WORK_DIR}/out 0.05)

@@ -5,8 +5,12 @@
 #include <sstream>
 #include <string>
 
+#include <cmath>
+#include <numbers>
+
 #include "check.hpp"
 #include "mspace/conformance.hpp"
+#include "mspace/numeric.hpp"
 #include "plugin_registry.hpp"
 
 namespace {
@@ -42,9 +46,8 @@ TEST(Conformance, WrongJacobianSignFailsTheJacobianChecks) {
   EXPECT_FALSE(r.passed());
   EXPECT_FALSE(passed(r, "feature.J_eta_o"));
   EXPECT_FALSE(passed(r, "feature.J_eta_xp"));
-  // J_ηo = −∂h/∂x_o: the error is 2·max|J| / max(1, max|J|), in (1, 2].
-  EXPECT_GT(r.find("feature.J_eta_o")->worst, 1.0);
-  EXPECT_LT(r.find("feature.J_eta_o")->worst, 2.0 + 1e-6);
+  // J_ηo = −∂h/∂x_o: each row's error is 2·max|J_i| / max|J_i| = 2.
+  EXPECT_NEAR(r.find("feature.J_eta_o")->worst, 2.0, 1e-4);
   EXPECT_TRUE(passed(r, "feature.B_Bdual_identity"));
   EXPECT_TRUE(passed(r, "feature.J_eta_v"));
 }
@@ -68,6 +71,87 @@ TEST(Conformance, NonDualBFailsEquation12AndTheExtensionThroughIt) {
   EXPECT_EQ(r.failures(), 2);
 }
 
+TEST(Conformance, PointExercisesTheExtensionAndGatingChecks) {
+  const conformance::Report r = check("point", MSPACE_PLUGIN_DIR);
+  for (const char* name : {"feature.extension_reached", "feature.extension_C_new", "feature.gating_covariance"})
+    EXPECT_TRUE(passed(r, name)) << name;
+  EXPECT_LT(r.find("feature.extension_C_new")->worst, 1e-6);
+  EXPECT_LT(r.find("feature.gating_covariance")->worst, 1e-6);
+}
+
+// Wall ends (2 → 3 → 4) and hline positions (1 → 3) extend only from
+// observations that differ (real ends, a baseline): sample_observation()
+// provides them, so these extensions are checked instead of skipped.
+TEST(Conformance, MovingObservationsReachEveryDimension) {
+  for (const char* type : {"wall", "hline"}) {
+    const conformance::Report r = check(type, MSPACE_PLUGIN_DIR);
+    EXPECT_TRUE(r.passed()) << type;
+    EXPECT_TRUE(passed(r, "feature.extension_reached")) << type;
+    EXPECT_TRUE(passed(r, "feature.extension_J_own")) << type;
+    EXPECT_TRUE(passed(r, "feature.extension_C_new")) << type;
+    EXPECT_EQ(r.find("feature.extension_reached")->note.find(": 0/"), std::string::npos) << type;
+  }
+}
+
+TEST(Conformance, InflatedCnewFailsTheCovarianceCheck) {
+  const conformance::Report r = check("broken_cnew", MSPACE_CONFORMANCE_FIXTURE_DIR);
+  const conformance::CheckResult* c = r.find("feature.extension_C_new");
+  ASSERT_NE(c, nullptr);
+  EXPECT_FALSE(c->passed);
+  EXPECT_NEAR(c->worst, 49.0, 1e-3);  // every generalised eigenvalue is 50
+  EXPECT_TRUE(passed(r, "feature.extension_C_new_spd"));  // what used to be the only check
+  EXPECT_TRUE(passed(r, "feature.extension_J_sensor"));
+  EXPECT_EQ(r.failures(), 1);
+}
+
+TEST(Conformance, NoExtensionFailsInsteadOfSkipping) {
+  const conformance::Report r = check("broken_never", MSPACE_CONFORMANCE_FIXTURE_DIR);
+  const conformance::CheckResult* c = r.find("feature.extension_reached");
+  ASSERT_NE(c, nullptr);
+  EXPECT_FALSE(c->passed);
+  EXPECT_FALSE(c->skipped);
+  // One per dimension below the largest (a point with dims {0, 3}: 1).
+  EXPECT_GE(c->worst, 1.0);
+  EXPECT_NE(c->note.find("from dim 0: 0/8"), std::string::npos) << c->note;
+  EXPECT_EQ(r.failures(), 1);
+}
+
+TEST(Conformance, InflatedGatingCovarianceFails) {
+  const conformance::Report r = check("broken_gating", MSPACE_CONFORMANCE_FIXTURE_DIR);
+  const conformance::CheckResult* c = r.find("feature.gating_covariance");
+  ASSERT_NE(c, nullptr);
+  EXPECT_FALSE(c->passed);
+  EXPECT_NEAR(c->worst, 49.0, 1e-3);
+  EXPECT_EQ(r.failures(), 1);
+}
+
+// η, J_ηo and J_ηv are all ~1e-6: the old tolerance (1e-5 × max(1, |J|))
+// passed the wrong sign (error 2e-6·|J| < 1e-5). Per row, relative to
+// max(|J_i|, kRowFloor = 1e-3), the error is 2e-6·|J_i|/1e-3 ≈ 2e-3: 200× the
+// tolerance (rows above the floor are compared fully relatively: 2).
+TEST(Conformance, SmallJacobiansAreComparedRelativeToTheirSize) {
+  const conformance::Report r = check("broken_small", MSPACE_CONFORMANCE_FIXTURE_DIR);
+  const conformance::CheckResult* c = r.find("feature.J_eta_o");
+  ASSERT_NE(c, nullptr);
+  EXPECT_FALSE(c->passed);
+  EXPECT_GT(c->worst, 100 * c->tolerance);
+  EXPECT_TRUE(passed(r, "feature.J_eta_v"));          // consistently scaled: right
+  EXPECT_TRUE(passed(r, "feature.sample_consistent"));  // NIS does not see the units
+}
+
+TEST(Conformance, CostsSayWhatIsAnalytic) {
+  const conformance::Report r = check("point", MSPACE_PLUGIN_DIR);
+  ASSERT_GE(r.costs.size(), 2u);  // innovation, then one "extend from dim D" per dimension that extends
+  const conformance::Cost& inn = r.costs[0];
+  EXPECT_EQ(inn.function, "innovation");
+  EXPECT_TRUE(inn.numeric.empty());
+  EXPECT_EQ(inn.analytic, (std::vector<std::string>{"J_eta_o", "J_eta_v"}));
+  EXPECT_GT(inn.micros, 0.0);
+  EXPECT_GT(inn.micros_by_differences, inn.micros);
+  EXPECT_EQ(r.costs[1].function, "extend from dim 0");
+  EXPECT_EQ(r.costs[1].analytic, (std::vector<std::string>{"J_sensor"}));
+}
+
 TEST(Conformance, JunitListsEveryCheckAndFailure) {
   const conformance::Report r = check("broken_dual", MSPACE_CONFORMANCE_FIXTURE_DIR);
   std::ostringstream xml;
@@ -76,6 +160,87 @@ TEST(Conformance, JunitListsEveryCheckAndFailure) {
                            "\" failures=\"2\""),
             std::string::npos);
   EXPECT_NE(xml.str().find("name=\"feature.B_Bdual_identity\"><failure"), std::string::npos);
+}
+
+// ---------------------------------------------------------------- numeric helpers
+
+// f(x) = (x0² x1, sin x1 / x0): central differences with a relative step
+// match the analytic Jacobian to ~1e-9 even at x0 = 1e3.
+TEST(NumericJacobian, MatchesTheAnalyticJacobianAtEveryScale) {
+  for (double scale : {1e-3, 1.0, 1e3}) {
+    const Eigen::Vector2d x(scale, 0.7);
+    const mspace::NumericFunction f = [](const Eigen::VectorXd& y, Eigen::VectorXd& out) {
+      out = Eigen::Vector2d(y[0] * y[0] * y[1], std::sin(y[1]) / y[0]);
+      return true;
+    };
+    Eigen::Matrix2d analytic;
+    analytic << 2 * x[0] * x[1], x[0] * x[0], -std::sin(x[1]) / (x[0] * x[0]), std::cos(x[1]) / x[0];
+    mspace::NumericOptions o;
+    o.scale = x.cwiseAbs();
+    const Eigen::MatrixXd J = mspace::numeric_jacobian(mspace::NumericJacobian::other, f, x, o);
+    for (int i = 0; i < 2; ++i)
+      EXPECT_LT((J.row(i) - analytic.row(i)).cwiseAbs().maxCoeff(), 1e-8 * analytic.row(i).cwiseAbs().maxCoeff())
+          << "scale " << scale << " row " << i;
+  }
+}
+
+// A bearing residual at ±π: without angle_rows the jump of 2π gives a slope
+// of ~5e5; with it, the true slope −1.
+TEST(NumericJacobian, AngleRowsAreDifferencedWrapped) {
+  const mspace::Residual bearing = [](const Eigen::VectorXd& x_o, const Eigen::VectorXd& v, Eigen::VectorXd& eta) {
+    eta = Eigen::VectorXd::Constant(1, mspace::wrap_angle(std::atan2(x_o[1], x_o[0]) - v[0]));
+    return true;
+  };
+  const Eigen::Vector2d x_o(1.0, 0.0);
+  const Eigen::VectorXd v = Eigen::VectorXd::Constant(1, std::numbers::pi);
+  mspace::Innovation wrapped, raw;
+  mspace::NumericOptions o;
+  o.angle_rows = {0};
+  ASSERT_TRUE(mspace::numeric_innovation(bearing, x_o, v, wrapped, mspace::kNumericBoth, o));
+  ASSERT_TRUE(mspace::numeric_innovation(bearing, x_o, v, raw));
+  EXPECT_NEAR(wrapped.J_eta_v(0, 0), -1.0, 1e-8);
+  EXPECT_NEAR(wrapped.J_eta_o(0, 1), 1.0, 1e-8);  // ∂atan2(y, x)/∂y = x/r² = 1
+  EXPECT_GT(std::abs(raw.J_eta_v(0, 0)), 1e4);
+}
+
+// Only the requested Jacobians are differenced, and the usage is recorded.
+TEST(NumericJacobian, RecordsWhatItComputed) {
+  const mspace::Residual r = [](const Eigen::VectorXd& x_o, const Eigen::VectorXd& v, Eigen::VectorXd& eta) {
+    eta = x_o.head(2) - v;
+    return true;
+  };
+  mspace::reset_numeric_usage();
+  mspace::Innovation inn;
+  inn.J_eta_v = -Eigen::MatrixXd::Identity(2, 2);
+  ASSERT_TRUE(mspace::numeric_innovation(r, Eigen::Vector3d(1, 2, 3), Eigen::Vector2d(0.5, 0.5), inn,
+                                         mspace::kNumericEtaO));
+  EXPECT_EQ(inn.J_eta_o.rows(), 2);
+  EXPECT_EQ(inn.J_eta_o.cols(), 3);
+  EXPECT_NEAR(inn.J_eta_o(1, 1), 1.0, 1e-9);
+  EXPECT_NEAR(inn.J_eta_o(0, 2), 0.0, 1e-12);
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_o).calls, 1);
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_o).evaluations, 1 + 2 * 3);
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_v).calls, 0);
+  mspace::reset_numeric_usage();
+  EXPECT_EQ(mspace::numeric_usage(mspace::NumericJacobian::eta_o).calls, 0);
+}
+
+// Where one side cannot be evaluated, the one-sided difference is used;
+// where neither can, an exception says so.
+TEST(NumericJacobian, FallsBackToOneSidedDifferences) {
+  const mspace::NumericFunction sqrt_f = [](const Eigen::VectorXd& x, Eigen::VectorXd& out) {
+    if (x[0] < 1.0) return false;
+    out = Eigen::VectorXd::Constant(1, std::sqrt(x[0]));
+    return true;
+  };
+  const Eigen::MatrixXd J = mspace::numeric_jacobian(mspace::NumericJacobian::other, sqrt_f, Eigen::VectorXd::Ones(1));
+  EXPECT_NEAR(J(0, 0), 0.5, 1e-5);
+  const mspace::NumericFunction only_at_one = [](const Eigen::VectorXd& x, Eigen::VectorXd& out) {
+    out = x;
+    return x[0] == 1.0;
+  };
+  EXPECT_THROW(mspace::numeric_jacobian(mspace::NumericJacobian::other, only_at_one, Eigen::VectorXd::Ones(1)),
+               std::runtime_error);
 }
 
 TEST(Conformance, PluginNameOfFile) {

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "mspace/numeric.hpp"
 #include "mspace/pose.hpp"
 #include "mspace/saved_state.hpp"
 #include "mspace/transform.hpp"
@@ -88,6 +89,58 @@ void require_jamb_measurement(const Measurement& m) {
                                 "' measurement with a 4-vector (r1, b1, r2, b2), positive ranges and a 4×4 covariance");
 }
 
+// ---- The functions a numeric feature needs: values only, no derivatives.
+
+/// η = h(x_o) − v (eq. 16): the polar coordinates of both jambs minus the
+/// measurement, bearings wrapped. false when a jamb is at the sensor.
+bool jamb_residual(const Eigen::VectorXd& x_o, const Eigen::VectorXd& v, Eigen::VectorXd& eta) {
+  if (x_o.size() != kSize || v.size() != kSize) return false;
+  eta.resize(kSize);
+  for (int i = 0; i < 2; ++i) {
+    const Eigen::Vector2d q = x_o.segment<2>(2 * i);
+    if (q.norm() < 1e-6) return false;
+    const Eigen::Vector2d h = polar(q, nullptr);
+    eta[2 * i] = h[0] - v[2 * i];
+    eta[2 * i + 1] = mspace::wrap_angle(h[1] - v[2 * i + 1]);
+  }
+  return true;
+}
+
+/// The map-frame jambs of v seen from x_ms (the back-projection, no Jacobians).
+Eigen::VectorXd jambs_in_map(const Eigen::VectorXd& v, const Eigen::VectorXd& x_ms) {
+  return mspace::to_map_frame(doorway_layout(), jambs_in_sensor_frame(Eigen::Vector4d(v)), mspace::Pose6(x_ms));
+}
+
+/// The width |q2 − q1| of one observation.
+double width_of(const Eigen::Vector4d& v) {
+  const Eigen::Vector4d q = jambs_in_sensor_frame(v);
+  return (q.tail<2>() - q.head<2>()).norm();
+}
+
+/// Bearings (rows 1 and 3 of η) are differenced wrapped.
+const mspace::NumericOptions& jamb_options() {
+  static const mspace::NumericOptions options = [] {
+    mspace::NumericOptions o;
+    o.angle_rows = {1, 3};
+    return o;
+  }();
+  return options;
+}
+
+/// The width of one observation and its variance J_w C_v J_wᵀ, J_w by central differences.
+std::pair<double, double> measured_width_numeric(const Eigen::Vector4d& v, const Eigen::Matrix4d& C_v) {
+  const Eigen::MatrixXd J_wv = mspace::numeric_jacobian(
+      mspace::NumericJacobian::measurement,
+      [](const Eigen::VectorXd& x, Eigen::VectorXd& w) {
+        w = Eigen::VectorXd::Constant(1, width_of(x));
+        return true;
+      },
+      v);
+  return {width_of(v), (J_wv * C_v * J_wv.transpose())(0, 0)};
+}
+
+// ---- The analytic versions.
+
 /// The width |q2 − q1| of one observation and its variance J_w C_v J_wᵀ.
 std::pair<double, double> measured_width(const Eigen::Vector4d& v, const Eigen::Matrix4d& C_v) {
   Eigen::Matrix4d J_q;
@@ -168,6 +221,7 @@ Eigen::MatrixXd DoorwayFeature::B_dual() const {
 // eq. 16: η = h(x_o) − v with h the polar coordinates of both jambs; J_ηv = −I.
 bool DoorwayFeature::innovation(const Eigen::VectorXd& x_o, const Measurement& m, mspace::Innovation& out) const {
   if (!is_jamb_measurement(m) || x_o.size() != kSize) return false;
+  if (config_.numeric) return mspace::numeric_innovation(jamb_residual, x_o, m.v, out, mspace::kNumericBoth, jamb_options());
   out.eta.resize(kSize);
   out.J_eta_o = Eigen::MatrixXd::Zero(kSize, kSize);
   for (int i = 0; i < 2; ++i) {
@@ -203,7 +257,7 @@ void DoorwayFeature::place_at(const Eigen::Vector4d& v, const Eigen::Matrix4d& C
 }
 
 void DoorwayFeature::add_width_evidence(const Eigen::Vector4d& v, const Eigen::Matrix4d& C_v) {
-  const auto [w, var] = measured_width(v, C_v);
+  const auto [w, var] = config_.numeric ? measured_width_numeric(v, C_v) : measured_width(v, C_v);
   width_evidence_ += Eigen::Vector3d(w / var, 1.0 / var, 1.0);
 }
 
@@ -233,9 +287,31 @@ std::optional<Extension> DoorwayFeature::enter_map() {
   Extension ext;
   ext.new_dims = 3;
   ext.sensor = latest.view.sensor;
-  ext.J_sensor = B3 * J_fs;
   ext.J_own = Eigen::MatrixXd(3, 0);
-  const Eigen::MatrixXd C = B3 * J_fv * latest.C_v * J_fv.transpose() * B3.transpose();
+  Eigen::MatrixXd C;
+  if (config_.numeric) {
+    // The new coordinates δx_p = B3 δx_f as functions of the sensor pose and of v.
+    const Eigen::Vector4d v = latest.v;
+    const Eigen::VectorXd x_ms = latest.view.x_ms;
+    ext.J_sensor = mspace::numeric_jacobian(
+        mspace::NumericJacobian::sensor,
+        [&](const Eigen::VectorXd& x, Eigen::VectorXd& p) {
+          p = B3 * jambs_in_map(v, x);
+          return true;
+        },
+        x_ms);
+    const Eigen::MatrixXd J_v = mspace::numeric_jacobian(
+        mspace::NumericJacobian::measurement,
+        [&](const Eigen::VectorXd& vv, Eigen::VectorXd& p) {
+          p = B3 * jambs_in_map(vv, x_ms);
+          return true;
+        },
+        v);
+    C = J_v * latest.C_v * J_v.transpose();
+  } else {
+    ext.J_sensor = B3 * J_fs;
+    C = B3 * J_fv * latest.C_v * J_fv.transpose() * B3.transpose();
+  }
   ext.C_new = 0.5 * (C + C.transpose());
   observations_.clear();
   return ext;
@@ -283,6 +359,9 @@ mspace::SavedFeature DoorwayFeature::save() const {
 
 std::vector<mspace::ParamSpec> DoorwayType::param_specs() {
   return {
+      mspace::param_string("jacobians", "analytic",
+                           "how the Jacobians are computed: by hand, or by the SDK's central differences",
+                           {"analytic", "numeric"}),
       mspace::param_int("min_observations", 3, "observations before a tentative doorway enters the map", 1),
       mspace::param_int("width_observations", 10, "width observations before the width is estimated", 1),
       mspace::param_int("max_dense", 10, "observations kept while tentative (≥ min_observations)", 1),
@@ -290,6 +369,7 @@ std::vector<mspace::ParamSpec> DoorwayType::param_specs() {
 }
 
 DoorwayType::DoorwayType(const mspace::PluginArgs& args) {
+  config_.numeric = args.params.get_string("jacobians") == "numeric";
   config_.min_observations = static_cast<int>(args.params.get_int("min_observations"));
   config_.width_observations = static_cast<int>(args.params.get_int("width_observations"));
   config_.max_dense = static_cast<int>(args.params.get_int("max_dense"));

@@ -34,6 +34,11 @@ namespace doorway {
 inline constexpr const char* kJambsKind = "doorway_jambs";
 
 struct DoorwayConfig {
+  /// Parameter `jacobians`: false ("analytic") — every Jacobian by hand;
+  /// true ("numeric") — J_ηo, J_ηv, the extension's J_sensor and the
+  /// measurement Jacobians behind C_new by the SDK's central differences
+  /// (mspace/numeric.hpp) of the same functions. Both pass `mspace check`.
+  bool numeric = false;
   int min_observations = 3;     ///< observations before a tentative doorway enters the map (dim 3)
   int width_observations = 10;  ///< width observations before the width enters the M-space (dim 4)
   int max_dense = 10;           ///< observations kept while tentative

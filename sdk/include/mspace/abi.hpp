@@ -14,7 +14,9 @@
 // layout (2: DataSource::recorded_mounts; 3, all from one session:
 // SavedFeature::arrays and SavedFeature::version, the dense information of
 // map files; Estimator::wants_problem and relinearize, mspace/problem.hpp,
-// EkfFilter in the SDK library; DataStep::odometry_covariance).
+// EkfFilter in the SDK library; DataStep::odometry_covariance;
+// FeatureType::sample_observation, so that the conformance suite can drive
+// extensions that need a moving sensor).
 #define MSPACE_SDK_VERSION_MAJOR 3
 #define MSPACE_SDK_VERSION_MINOR 0
 

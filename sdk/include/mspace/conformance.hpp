@@ -9,9 +9,13 @@
 //     (FeatureType::sample): B·B̃ = I (eq. 12), B̃ of full column rank, J_ηo
 //     and J_ηv (eq. 16) and the chain J_ηo·J_of·B̃ (eq. 30) against central
 //     differences, invariance along declared symmetry directions, the
-//     extension (sizes, C_new symmetric positive definite, J_sensor and J_own
-//     against differences), save/restore round trip, determinism, finite
-//     values and clear errors for wrong-sized inputs;
+//     extension (reached from every non-final dimension, sizes, J_sensor and
+//     J_own against differences of the extended coordinates, C_new against
+//     Σ_k J_v,k C_v J_v,kᵀ from differences in the measurements), the gating
+//     covariance of a new feature against differences of create() in v and
+//     x_ms, save/restore round trip, determinism, finite values and clear
+//     errors for wrong-sized inputs; the cost per call of innovation() and
+//     extend() and which of their Jacobians are numeric (mspace/numeric.hpp);
 //   * motion models: J_rr and J_rd (eq. 26) against central differences, C_d;
 //   * estimators: a small linear-Gaussian problem against the closed-form
 //     Kalman prediction, augmentation, update (eqs. 26–32) and removal;
@@ -22,6 +26,7 @@
 #include <cstdint>
 #include <map>
 #include <iosfwd>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -38,12 +43,29 @@ struct CheckResult {
   bool passed = true;
   bool skipped = false;     ///< nothing to check (e.g. no symmetry declared)
   std::string note;         ///< first failure message, or why it was skipped
+  bool show_note = false;   ///< the note says something on a pass too (e.g. how often)
+};
+
+/// What one function of a feature type costs per call, and which of its
+/// Jacobians come from the SDK's numeric helpers (mspace/numeric.hpp).
+struct Cost {
+  std::string function;             ///< "innovation" or "extend from dim D"
+  std::vector<std::string> numeric;   ///< Jacobians filled by central differences (numeric_usage())
+  std::vector<std::string> analytic;  ///< the others the function returns
+  double micros = 0.0;              ///< measured time per call (µs), mean over the samples
+  double evaluations = 0.0;         ///< function evaluations of the numeric helpers per call (J_measurement included)
+  /// innovation only: the time per call of J_ηo and J_ηv by central
+  /// differences through innovation() itself (2(n + m) + 1 calls) — what
+  /// switching every Jacobian to numeric would cost at most; NaN if not measured.
+  double micros_by_differences = std::numeric_limits<double>::quiet_NaN();
+  int calls = 0;                    ///< calls timed
 };
 
 struct Report {
   std::string plugin;  ///< descriptor name
   std::string kind;    ///< plugin_kind_name()
   std::vector<CheckResult> checks;
+  std::vector<Cost> costs;  ///< feature types only
 
   int failures() const;
   bool passed() const { return failures() == 0; }
@@ -63,7 +85,8 @@ struct Options {
 /// misbehaving plugin: exceptions become failed checks.
 Report check_plugin(const PluginDescriptor& descriptor, const Options& options = {});
 
-/// One line per check: "PASS  name  worst 1.2e-09  (tol ≤ 1e-06)  note".
+/// One line per check: "PASS  name  worst 1.2e-09  (tol ≤ 1e-06)  note",
+/// then one line per Cost.
 void print_report(const Report& report, std::ostream& out);
 
 /// JUnit XML (one <testsuite> per report, one <testcase> per check).

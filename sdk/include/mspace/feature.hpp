@@ -108,6 +108,14 @@ struct FeatureSample {
   Measurement measurement;
 };
 
+/// The k-th observation of a sample's feature by a moving sensor
+/// (FeatureType::sample_observation): where the sensor is and what it measures.
+struct SampleObservation {
+  Pose6 x_ms;                  ///< sensor pose in the map frame
+  double path_distance = 0.0;  ///< SensorView::path_distance of this observation
+  Measurement measurement;     ///< consistent with the feature (innovation ≈ 0)
+};
+
 class Feature {
  public:
   virtual ~Feature() = default;
@@ -213,6 +221,13 @@ class FeatureType : public PluginObject {
   /// reachable. The default throws std::logic_error (the suite reports the
   /// type as not checkable).
   virtual std::optional<FeatureSample> sample(int dim, std::uint64_t seed) const;
+  /// Conformance support for types that cannot extend from repeated
+  /// identical observations (parallax, a baseline, real end points): the
+  /// k-th observation (k = 1, 2, …) of the feature of sample(dim, seed) by a
+  /// sensor moving as in a run. The suite feeds k = 1, 2, … until the
+  /// feature extends. The default (std::nullopt) makes the suite feed the
+  /// sample's own measurement from its own pose every time.
+  virtual std::optional<SampleObservation> sample_observation(int dim, std::uint64_t seed, int k) const;
   /// Rebuilds a feature from Feature::save(): restore(f.save()) must behave
   /// exactly as f from then on. Throws std::invalid_argument for state it
   /// cannot read (wrong sizes, unknown version). The default throws
