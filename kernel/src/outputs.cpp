@@ -259,6 +259,11 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;
     for (const std::string& w : h.warnings) y << w;
     y << YAML::EndSeq;
+    if (!h.notes.empty()) {
+      y << YAML::Key << "notes" << YAML::Value << YAML::BeginSeq;
+      for (const std::string& n : h.notes) y << n;
+      y << YAML::EndSeq;
+    }
     y << YAML::EndMap;
   }
   y << YAML::EndMap;
@@ -347,6 +352,7 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     if (h.updates > 0) os << std::setprecision(2) << ", NIS " << h.nis_ratio << "x expected" << std::setprecision(3);
     os << "\n";
     for (const std::string& w : h.warnings) os << "  WARNING: " << w << "\n";
+    for (const std::string& n : h.notes) os << "  note: " << n << "\n";
   }
   if (s.skipped_records > 0) os << "  skipped malformed input records: " << s.skipped_records << "\n";
   return os.str();

@@ -81,12 +81,20 @@ void SensorHealth::record_update(double nis, int rows) {
          " — the filter is overconfident: its measurement noise (or the motion noise) is set smaller than the "
          "data shows");
   } else if (side < 0 && !warned_low_) {
+    // Not a warning: noise set larger on purpose (errors correlated from
+    // reading to reading, e.g. one line seen in many frames) shows this way.
     warned_low_ = true;
-    warn("sensor " + r_.sensor + ": " + figures + " — its measurement noise is set larger than the data shows");
+    std::string text = "sensor " + r_.sensor + ": " + figures +
+                       " — its measurement noise is set larger than these innovations show (fine if chosen to cover "
+                       "errors correlated from reading to reading)";
+    r_.notes.push_back(text);
+    new_notes_.push_back(std::move(text));
   }
 }
 
 std::vector<std::string> SensorHealth::take_new_warnings() { return std::exchange(new_warnings_, {}); }
+
+std::vector<std::string> SensorHealth::take_new_notes() { return std::exchange(new_notes_, {}); }
 
 SensorHealthReport SensorHealth::report() const {
   SensorHealthReport out = r_;

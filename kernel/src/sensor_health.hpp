@@ -21,9 +21,11 @@
 //   * the sensor produced no measurement in its first `silent_span` readings,
 //     or no measurement of it matched a feature in `silent_span` readings that
 //     had measurements;
-//   * persistently inconsistent updates: the NIS ratio of kPersistentWindows
-//     consecutive windows of `nis_window` updates each beyond kNisRatioHigh
-//     (overconfident) or each below kNisRatioLow.
+//   * persistently overconfident updates: the NIS ratio of kPersistentWindows
+//     consecutive windows of `nis_window` updates each beyond kNisRatioHigh.
+// Persistently small NIS (each window below kNisRatioLow) is a note, not a
+// warning: noise set larger on purpose, to cover errors correlated from
+// reading to reading, shows the same way.
 #pragma once
 
 #include <cstdint>
@@ -43,6 +45,7 @@ struct SensorHealthReport {
   double mean_nis_per_row = 0.0;       ///< observed mean NIS per innovation row
   double expected_nis_per_row = 0.0;   ///< its expectation for a consistent filter, under the gate
   std::vector<std::string> warnings;
+  std::vector<std::string> notes;  ///< NIS persistently small
 };
 
 class SensorHealth {
@@ -66,6 +69,8 @@ class SensorHealth {
 
   /// Warnings raised since the last call (for the log).
   std::vector<std::string> take_new_warnings();
+  /// Notes made since the last call (for the log).
+  std::vector<std::string> take_new_notes();
   SensorHealthReport report() const;
 
  private:
@@ -85,7 +90,7 @@ class SensorHealth {
   int windows_out_ = 0, last_side_ = 0;
   double window_ratio_sum_ = 0.0;
   std::vector<double> expected_by_rows_;  ///< cache, by row count
-  std::vector<std::string> new_warnings_;
+  std::vector<std::string> new_warnings_, new_notes_;
 };
 
 }  // namespace mspace::kernel

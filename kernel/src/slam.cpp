@@ -395,6 +395,7 @@ void Slam::record_health(int sensor_index, const ReadingWork& w, double extract_
     if (features_[match.feature].feature->mspace_dim() > 0)
       health.record_update(match.candidate.d2, static_cast<int>(match.candidate.innovation.eta.size()));
   for (const std::string& warning : health.take_new_warnings()) log_->warn("step ", step_, ": ", warning);
+  for (const std::string& note : health.take_new_notes()) log_->info("step ", step_, ": ", note);
 }
 
 std::vector<SensorHealthReport> Slam::sensor_health() const {
