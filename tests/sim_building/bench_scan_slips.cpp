@@ -63,6 +63,8 @@ struct Step {
   bool ok = false, correlative = false;
   int pairs = 0, overlap = 0;
   double rms = 0.0;
+  int dropped = 0;  ///< reference points dropped as moving
+  double previous_xy = 0.0;  ///< error of the increment before
 };
 
 double xy_error(const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return (a - b).head<2>().norm(); }
@@ -75,6 +77,7 @@ double th_error_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 int main(int argc, char** argv) {
   std::string plans = "ring,ladder,l_ring", seeds = "1,2,3", out = "out/bench_scan_slips", laser = "sick181";
   int people = -1, worst = 8;
+  bool moving = true, starts = false;
   double length = 400.0;
   CLI::App app{"laser odometry per-increment errors on simulated buildings, and the worst increments"};
   app.add_option("--plans", plans, "comma-separated plan names or indices")->capture_default_str();
@@ -83,6 +86,9 @@ int main(int argc, char** argv) {
   app.add_option("--worst", worst, "worst increments printed per building")->capture_default_str();
   app.add_option("--length-m", length, "route length before the final lap")->capture_default_str();
   app.add_option("--laser", laser, "laser preset")->capture_default_str();
+  app.add_option("--drop-moving", moving, "drop reference points that moved since the scan before (1/0)")
+      ->capture_default_str();
+  app.add_flag("--starts", starts, "list only the slips after a good step");
   app.add_option("--out", out, "folder for the data sets")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   set_log_level(LogLevel::Warn);
@@ -112,6 +118,11 @@ int main(int argc, char** argv) {
       const auto& log = source.contents();
       sm::MatchOptions options;
       options.max_correspondence = config.source.params.get_double("scan_match_max_correspondence");
+      if (const char* f = std::getenv("MOVING_MAX_FRACTION")) options.moving_max_fraction = std::atof(f);
+      if (const char* f = std::getenv("SEED_SIGMA_XY")) options.seed_sigma_xy = std::atof(f);
+      if (const char* f = std::getenv("SEED_SIGMA_TH")) options.seed_sigma_theta = std::atof(f);
+      if (const char* f = std::getenv("SEED_GATE")) options.seed_gate = std::atof(f);
+      if (const char* f = std::getenv("MAX_CORR")) options.max_correspondence = std::atof(f);
       sm::MatchOptions local_options = options;
       local_options.correlative = false;
       const sm::LaserOdometry odometry(source.laser_mount(), options);
@@ -121,16 +132,21 @@ int main(int argc, char** argv) {
       };
       std::vector<Step> steps;
       std::vector<double> exy, eth, sxy;
-      int failed = 0, correlative = 0;
+      int failed = 0, correlative = 0, disagreed = 0;
+      Eigen::Vector3d previous_increment = Eigen::Vector3d::Zero();
       for (std::size_t k = 1; k < log.scans.size(); ++k) {
         const auto& a = log.scans[k - 1];
         const auto& b = log.scans[k];
         if (!a.ground_truth || !b.ground_truth) continue;
         const Eigen::Vector3d truth = carmen_log::odometry_increment(*a.ground_truth, *b.ground_truth);
         const Eigen::Vector3d wheel = carmen_log::odometry_increment(a.odometry, b.odometry);
-        const sm::ReferenceScan reference(points_of(a), options);
+        const sm::ReferenceScan plain(points_of(a), options);
+        const sm::ReferenceScan reference =
+            moving && k >= 2 ? odometry.reference(points_of(a), points_of(log.scans[k - 2]), previous_increment)
+                             : sm::ReferenceScan(points_of(a), options);
         const sm::ScanPoints current = points_of(b);
         const sm::OdometryResult r = odometry.match(reference, current, wheel);
+        previous_increment = r.increment;
         Step s;
         s.k = k;
         s.t = b.t;
@@ -143,12 +159,23 @@ int main(int argc, char** argv) {
         s.pairs = r.match.pairs;
         s.overlap = r.match.overlap;
         s.rms = r.match.rms;
+        s.dropped = plain.usable_points() - reference.usable_points();
+        s.previous_xy = exy.empty() ? 0.0 : exy.back();
         failed += s.ok ? 0 : 1;
         correlative += s.correlative ? 1 : 0;
+        disagreed += r.match.disagreed ? 1 : 0;
         exy.push_back(s.err_xy);
         eth.push_back(s.err_th);
         sxy.push_back(s.seed_xy);
         steps.push_back(s);
+      }
+      // The slips that start a run of slips (the step before was good): what
+      // made the first one slip, not the ones that followed it.
+      if (starts) {
+        std::vector<Step> first;
+        for (const Step& s : steps)
+          if (s.err_xy > 0.05 && s.previous_xy < 0.01) first.push_back(s);
+        steps = first;
       }
       std::sort(steps.begin(), steps.end(), [](const Step& x, const Step& y) { return x.err_xy > y.err_xy; });
       // The local-only match only for the worst ones (it is a second match).
@@ -161,18 +188,18 @@ int main(int argc, char** argv) {
         s.local_xy = xy_error(local.match(points_of(a), points_of(b), wheel).increment, truth);
       }
       const auto over = std::count_if(exy.begin(), exy.end(), [](double e) { return e > 0.05; });
-      std::printf("%-10s %2s people %2zu: %5zu incr, failed %3d, correlative %3d | xy median %.4f p99 %.4f max %.3f m, "
+      std::printf("%-10s %2s people %2zu: %5zu incr, failed %3d, correlative %3d, disagreed %3d | xy median %.4f p99 %.4f max %.3f m, "
                   "> 5 cm %3ld | th median %.3f p99 %.3f max %.2f deg | seed xy median %.4f p99 %.4f\n",
-                  sim.plan.name.c_str(), seed_text.c_str(), sim.plan.people.size(), exy.size(), failed, correlative,
+                  sim.plan.name.c_str(), seed_text.c_str(), sim.plan.people.size(), exy.size(), failed, correlative, disagreed,
                   quantile(exy, 0.5), quantile(exy, 0.99), quantile(exy, 1.0), static_cast<long>(over),
                   quantile(eth, 0.5), quantile(eth, 0.99), quantile(eth, 1.0), quantile(sxy, 0.5),
                   quantile(sxy, 0.99));
       for (int i = 0; i < worst && i < static_cast<int>(steps.size()); ++i) {
         const Step& s = steps[static_cast<std::size_t>(i)];
-        std::printf("    scan %5zu t %7.1f: err %.3f m %.2f deg | seed %.3f m %.2f deg | %s%s pairs %3d / %3d rms %.4f "
-                    "| local-only err %.3f m\n",
+        std::printf("    scan %5zu t %7.1f: err %.3f m %.2f deg | seed %.3f m %.2f deg | %s%s pairs %3d / %3d rms %.4f dropped %3d "
+                    "| local-only err %.3f m, previous step's %.3f m\n",
                     s.k, s.t, s.err_xy, s.err_th, s.seed_xy, s.seed_th, s.ok ? "ok" : "FAILED",
-                    s.correlative ? " correlative" : "", s.pairs, s.overlap, s.rms, s.local_xy);
+                    s.correlative ? " correlative" : "", s.pairs, s.overlap, s.rms, s.dropped, s.local_xy, s.previous_xy);
       }
       std::fflush(stdout);
       all_xy.insert(all_xy.end(), exy.begin(), exy.end());
