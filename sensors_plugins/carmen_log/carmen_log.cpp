@@ -121,11 +121,16 @@ void CarmenLogSource::ground_truth_from_file(const Params& params, const std::st
 void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   scan_matching::MatchOptions options;
   options.max_correspondence = params.get_double("scan_match_max_correspondence");
+  options.seed_sigma_xy = params.get_double("scan_match_seed_sigma_xy");
+  options.seed_sigma_theta = params.get_double("scan_match_seed_sigma_theta_deg") * std::numbers::pi / 180.0;
+  options.seed_gate = params.get_double("scan_match_seed_gate");
+  const bool drop_moving = params.get_bool("scan_match_drop_moving");
   const double limit = params.get_double("scan_match_max_range");
   const double max_range = limit > 0.0 ? std::min(limit, log_.laser.no_return) : log_.laser.no_return;
   const scan_matching::LaserOdometry odometry(mount_, options);
   std::vector<double> residuals;
-  std::size_t kept_seed = 0, correlative = 0;
+  std::size_t kept_seed = 0, correlative = 0, disagreed = 0;
+  Eigen::Vector3d previous_increment = Eigen::Vector3d::Zero();  // robot motion from scan i − 2 to i − 1
   std::vector<Pose2> matched(log_.scans.size());
   covariances_.assign(log_.scans.size(), Eigen::Matrix3d::Zero());
   matched[0] = log_.scans[0].odometry;
@@ -134,7 +139,15 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
     const Scan& previous = log_.scans[i - 1];
     const Scan& current = log_.scans[i];
     const Eigen::Vector3d seed = odometry_increment(previous.odometry, current.odometry);
-    const scan_matching::OdometryResult r = odometry.match(points_of(previous), points_of(current), seed);
+    // The previous scan as the reference; with scan_match_drop_moving, its
+    // points that the scan before it did not see there (things that moved)
+    // are dropped, the increment between the two being the one just matched.
+    const scan_matching::ReferenceScan reference =
+        drop_moving && i >= 2 ? odometry.reference(points_of(previous), points_of(log_.scans[i - 2]), previous_increment)
+                              : scan_matching::ReferenceScan(points_of(previous), options);
+    const scan_matching::OdometryResult r = odometry.match(reference, points_of(current), seed);
+    previous_increment = r.increment;
+    disagreed += r.match.disagreed ? 1 : 0;
     if (r.match.ok) {
       residuals.push_back(r.match.rms);
       covariances_[i] = r.covariance;
@@ -154,7 +167,8 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   }
   log.info("laser odometry: ", residuals.size(), " of ", log_.scans.size() - 1,
            " increments scan-matched (median residual ", median * 1000.0, " mm, ", correlative,
-           " after a correlative search), ", kept_seed, " kept the wheel odometry");
+           " after a correlative search, ", disagreed, " disagreed with the wheel odometry), ", kept_seed,
+           " kept the wheel odometry");
   if (kept_seed * 20 > log_.scans.size())
     log.warn("laser odometry: ", kept_seed, " of ", log_.scans.size() - 1,
              " scan matches failed (more than 5 %): check no_return_range, laser_offset and scan_match_max_range");
@@ -198,6 +212,20 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                    "largest distance (m) between paired points in the first ICP iteration (it shrinks to 0.1 m): "
                    "at least the wheel odometry's error between two scans",
                    0.05, 5.0),
+      param_double("scan_match_seed_sigma_xy", 0.1,
+                   "the wheel odometry's translation error per scan (m, 1 σ): the scan matcher's prior on the seed "
+                   "(0.1 m: a weak prior, for poor odometry) and the scale of scan_match_seed_gate",
+                   1e-4),
+      param_double("scan_match_seed_sigma_theta_deg", 5.73,
+                   "the wheel odometry's heading error per scan (deg, 1 σ), as scan_match_seed_sigma_xy", 1e-3),
+      param_double("scan_match_seed_gate", 0.0,
+                   "χ² bound (3 dof) on a match's difference from the seed in units of the seed sigmas: a match "
+                   "further from the wheel odometry (pulled by something moving) is replaced by a tight match from "
+                   "the seed, or by the seed (16.27: 0.1 %); 0: no check. Only with seed sigmas the odometry meets",
+                   0.0),
+      param_bool("scan_match_drop_moving", false,
+                 "drop points of the reference scan that the scan before it did not see there (moving people, "
+                 "doors) before matching the next scan to it"),
       param_string("ground_truth", "log",
                    "ground truth: `log` = the corrected poses of the log when it has them (table, GMapping log), "
                    "`none`, or a TUM file `t x y z qx qy qz qw` (time base of the log, time_offset added) whose "

@@ -209,6 +209,60 @@ int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q) const {
   return best;
 }
 
+// ---- Moving objects -----------------------------------------------------------
+
+int ReferenceScan::drop_moving(const ScanPoints& older, const Eigen::Vector3d& older_pose) {
+  if (older.empty() || points_.empty()) return 0;
+  // The older points by bearing in their own frame; each reference point is
+  // moved into that frame, p_o = R_oᵀ (p − t_o) with its normal n_o = R_oᵀ n,
+  // and compared with the older points around its bearing there.
+  std::vector<std::pair<double, Eigen::Vector2d>> by_bearing;
+  by_bearing.reserve(older.size());
+  for (const auto& o : older) by_bearing.emplace_back(std::atan2(o.y(), o.x()), o);
+  std::sort(by_bearing.begin(), by_bearing.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  const Eigen::Matrix2d Rt = rotation(older_pose[2]).transpose();
+  const double t = std::max(options_.moving_distance, 4.0 * noise_);
+  const int w = std::max(1, options_.association_window);
+  std::vector<char> keep(points_.size(), 0);
+  int dropped = 0;
+  for (std::size_t i = 0; i < points_.size(); ++i) {
+    const Eigen::Vector2d p = Rt * (points_[i] - older_pose.head<2>());
+    const Eigen::Vector2d n = Rt * normals_[i];
+    const double b = std::atan2(p.y(), p.x());
+    // Along the line, sparse far beams put the nearest older beam on the same
+    // wall up to half a beam spacing away (1.5 ρ δ leaves room for the
+    // increment's own heading error).
+    const double along = std::max(t, 1.5 * p.norm() * spacing_);
+    const auto at = std::lower_bound(by_bearing.begin(), by_bearing.end(), b,
+                                     [](const auto& e, double v) { return e.first < v; }) -
+                    by_bearing.begin();
+    const auto count = static_cast<long>(by_bearing.size());
+    for (long k = std::max(0L, at - w); k < std::min(count, at + w); ++k) {
+      const Eigen::Vector2d d = by_bearing[static_cast<std::size_t>(k)].second - p;
+      if (std::abs(n.dot(d)) <= t && d.squaredNorm() <= along * along) {
+        keep[i] = 1;
+        break;
+      }
+    }
+    dropped += keep[i] ? 0 : 1;
+  }
+  // Many inconsistent points: the older pose (the previous increment) is
+  // wrong, or the scene changed wholesale; then nothing is known to move.
+  if (dropped > options_.moving_max_fraction * static_cast<double>(points_.size())) return 0;
+  std::size_t j = 0;
+  for (std::size_t i = 0; i < points_.size(); ++i) {
+    if (!keep[i]) continue;
+    points_[j] = points_[i];
+    normals_[j] = normals_[i];
+    bearings_[j] = bearings_[i];
+    ++j;
+  }
+  points_.resize(j);
+  normals_.resize(j);
+  bearings_.resize(j);
+  return dropped;
+}
+
 // ---- Heading search ----------------------------------------------------------
 
 Eigen::Vector3d ReferenceScan::heading_search(const ScanPoints& current, const Eigen::Vector3d& seed) const {
@@ -402,7 +456,7 @@ struct ReferenceScan::Local {
 };
 
 ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::Vector3d& start,
-                                        const Eigen::Vector3d& seed) const {
+                                        const Eigen::Vector3d& seed, double first_distance) const {
   Local out;
   Eigen::Vector3d T = start;
   // The weak prior Λ = diag(1/σ_xy², 1/σ_xy², 1/σ_θ²) on the seed keeps a
@@ -413,7 +467,9 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
   const double point_weight = 1.0 / (point_sigma_ * point_sigma_);
   for (int it = 0; it < options_.max_iterations; ++it) {
     const double max_distance =
-        correspondence_distance(std::max(options_.max_correspondence, min_correspondence_), min_correspondence_,
+        correspondence_distance(std::max(first_distance > 0.0 ? first_distance : options_.max_correspondence,
+                                         min_correspondence_),
+                                min_correspondence_,
                                 options_.max_iterations, it);
     const Eigen::Matrix2d R = rotation(T[2]);
     const Eigen::Matrix2d dR = rotation(T[2] + 0.5 * std::numbers::pi);  // ∂R/∂θ
@@ -497,6 +553,30 @@ MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vec
       from_correlative = true;
     }
   }
+  // Consistency with the seed: e = T − seed, d² = eᵀ S⁻¹ e with S the seed's
+  // covariance diag(σ_xy², σ_xy², σ_θ²). A match the scans alone pulled
+  // further than that (moving people, which a wall-less corridor direction
+  // lets drag the whole scan along) is replaced by the match from the seed
+  // whose correspondences never reach beyond min_correspondence: the moving
+  // points, displaced by more than that, stay unpaired and the static ones
+  // decide. If that match fails, the seed is kept (ok = false).
+  if (options_.seed_gate > 0.0 && ok(best)) {
+    auto disagrees = [&](const Local& l) {
+      Eigen::Vector3d e = l.T - seed;
+      e[2] = wrap(e[2]);
+      const double sxy2 = options_.seed_sigma_xy * options_.seed_sigma_xy;
+      const double sth2 = options_.seed_sigma_theta * options_.seed_sigma_theta;
+      return (e[0] * e[0] + e[1] * e[1]) / sxy2 + e[2] * e[2] / sth2 > options_.seed_gate;
+    };
+    if (disagrees(best)) {
+      best = icp(current, seed, seed, min_correspondence_);
+      from_correlative = false;
+      result.disagreed = true;
+      // Still pulled beyond the seed's uncertainty (something moving by less
+      // than min_correspondence per scan): the seed is the better estimate.
+      if (disagrees(best)) best.rms = std::numeric_limits<double>::infinity();
+    }
+  }
   result.pairs = best.pairs;
   result.overlap = best.overlap;
   result.rms = std::isfinite(best.rms) ? best.rms : 0.0;
@@ -545,6 +625,14 @@ Eigen::Vector3d LaserOdometry::laser_increment(const Eigen::Vector3d& d_r) const
 OdometryResult LaserOdometry::match(const ScanPoints& previous, const ScanPoints& current,
                                     const Eigen::Vector3d& robot_seed) const {
   return match(ReferenceScan(previous, options_), current, robot_seed);
+}
+
+ReferenceScan LaserOdometry::reference(const ScanPoints& previous, const ScanPoints& older,
+                                       const Eigen::Vector3d& robot_older_increment) const {
+  ReferenceScan reference(previous, options_);
+  // The older laser pose in the previous laser frame: ⊖(older → previous).
+  reference.drop_moving(older, inverse(laser_increment(robot_older_increment)));
+  return reference;
 }
 
 OdometryResult LaserOdometry::match(const ReferenceScan& previous, const ScanPoints& current,
