@@ -25,7 +25,8 @@
 // perturbations of the rows it touched — as a marginalisation prior would be.
 // It must not inform the new dimensions: the extension's prior (built from the
 // dense information) already holds that evidence, and the innovation may even
-// have other rows at the higher dimension (a wall's end points).
+// have other rows at the higher dimension (e.g. end-point rows once a
+// segment's ends enter its M-space).
 #pragma once
 
 #include <cstdint>
