@@ -1,0 +1,401 @@
+// loop_closing.cpp — map matching: hypotheses from a Hough transform over
+// planar motions, Gauss–Newton refinement, joint compatibility, uniqueness
+// (see loop_closing.hpp).
+#include "loop_closing.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <tuple>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
+
+#include "chi2.hpp"
+
+namespace mspace::kernel {
+
+namespace {
+
+bool is_point(BlockKind kind) { return kind == BlockKind::Point3D || kind == BlockKind::Point2D; }
+
+Eigen::Matrix2d rotation(double theta) {
+  const double c = std::cos(theta), s = std::sin(theta);
+  Eigen::Matrix2d R;
+  R << c, -s, s, c;
+  return R;
+}
+
+/// Whether any column of `M` has a non-zero entry in the rows of `block`.
+bool touches(const CoordLayout& layout, const Eigen::MatrixXd& M, int block) {
+  if (M.cols() == 0) return false;
+  const int first = layout.offset(block), size = block_size(layout.kind(block));
+  return M.middleRows(first, size).cwiseAbs().maxCoeff() > 1e-12;
+}
+
+/// Blocks a single direction (column) touches.
+std::vector<int> touched_blocks(const CoordLayout& layout, const Eigen::VectorXd& direction) {
+  std::vector<int> out;
+  for (int b = 0; b < layout.num_blocks(); ++b)
+    if (touches(layout, direction, b)) out.push_back(b);
+  return out;
+}
+
+/// n × n: R(θ) on the (x, y) rows of every point block, identity elsewhere.
+Eigen::MatrixXd block_rotation(const CoordLayout& layout, double theta) {
+  Eigen::MatrixXd Rn = Eigen::MatrixXd::Identity(layout.size(), layout.size());
+  const Eigen::Matrix2d R = rotation(theta);
+  for (int b = 0; b < layout.num_blocks(); ++b)
+    if (is_point(layout.kind(b))) Rn.block<2, 2>(layout.offset(b), layout.offset(b)) = R;
+  return Rn;
+}
+
+/// Centre of the point blocks' (x, y) and the largest distance from it.
+struct Footprint {
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  double radius = 0.0;
+  bool placed = false;  ///< has a point block
+};
+
+Footprint footprint(const FeatureShape& s) {
+  Footprint f;
+  int points = 0;
+  for (int b = 0; b < s.layout->num_blocks(); ++b)
+    if (is_point(s.layout->kind(b))) {
+      f.centre += s.x.segment<2>(s.layout->offset(b));
+      ++points;
+    }
+  if (points == 0) return f;
+  f.placed = true;
+  f.centre /= points;
+  for (int b = 0; b < s.layout->num_blocks(); ++b)
+    if (is_point(s.layout->kind(b)))
+      f.radius = std::max(f.radius, (s.x.segment<2>(s.layout->offset(b)) - f.centre).norm());
+  return f;
+}
+
+/// χ² quantiles by dimension, computed once.
+class Chi2Table {
+ public:
+  explicit Chi2Table(double p) : p_(p) {}
+  double operator()(int dof) {
+    if (dof <= 0) return 0.0;
+    auto it = cache_.find(dof);
+    if (it == cache_.end()) it = cache_.emplace(dof, chi2_quantile(p_, dof)).first;
+    return it->second;
+  }
+
+ private:
+  double p_;
+  std::map<int, double> cache_;
+};
+
+double mahalanobis2(const Eigen::VectorXd& r, const Eigen::MatrixXd& S) { return r.dot(S.ldlt().solve(r)); }
+
+struct Peak {
+  int votes = 0;
+  double theta = 0.0;
+  Eigen::Vector2d t = Eigen::Vector2d::Zero();
+};
+
+}  // namespace
+
+// ---- PlanarMotion -----------------------------------------------------------
+
+Eigen::Vector2d PlanarMotion::apply(const Eigen::Vector2d& p) const { return rotation(theta) * (p - pivot) + pivot + t; }
+
+Eigen::VectorXd PlanarMotion::apply(const CoordLayout& layout, const Eigen::VectorXd& x) const {
+  Eigen::VectorXd out = x;
+  for (int b = 0; b < layout.num_blocks(); ++b)
+    if (is_point(layout.kind(b))) out.segment<2>(layout.offset(b)) = apply(Eigen::Vector2d(x.segment<2>(layout.offset(b))));
+  return out;
+}
+
+Eigen::MatrixXd PlanarMotion::rotate(const CoordLayout& layout, const Eigen::MatrixXd& directions) const {
+  if (directions.cols() == 0) return directions;
+  return block_rotation(layout, theta) * directions;
+}
+
+PlanarMotion PlanarMotion::scaled(double fraction) const { return PlanarMotion{theta * fraction, t * fraction, pivot}; }
+
+// ---- The residual of one pair -----------------------------------------------
+
+bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const PlanarMotion& T, double floor_sigma,
+                          CoincidenceResidual& out) {
+  if (a.layout == nullptr || b.layout == nullptr || !(*a.layout == *b.layout)) return false;
+  const CoordLayout& layout = *b.layout;
+  const int n = layout.size();
+  const Eigen::VectorXd xa = T.apply(layout, a.x);
+
+  // Free directions: b's, then a's (rotated) on blocks b keeps fixed.
+  std::vector<Eigen::VectorXd> free;
+  for (Eigen::Index c = 0; c < b.free.cols(); ++c) free.emplace_back(b.free.col(c));
+  const Eigen::MatrixXd fa = T.rotate(layout, a.free);
+  for (Eigen::Index c = 0; c < fa.cols(); ++c) {
+    bool only_fixed_blocks = true;
+    for (int block : touched_blocks(layout, fa.col(c))) only_fixed_blocks = only_fixed_blocks && !touches(layout, b.free, block);
+    if (only_fixed_blocks) free.emplace_back(fa.col(c));
+  }
+  if (free.empty()) {
+    out.N = Eigen::MatrixXd::Identity(n, n);
+  } else {
+    Eigen::MatrixXd F(n, static_cast<Eigen::Index>(free.size()));
+    for (std::size_t c = 0; c < free.size(); ++c) F.col(static_cast<Eigen::Index>(c)) = free[c];
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(F);
+    qr.setThreshold(1e-9);
+    const Eigen::Index rank = qr.rank();
+    const Eigen::MatrixXd Q = qr.householderQ();
+    out.N = Q.rightCols(n - rank);
+  }
+  const Eigen::Index m = out.N.cols();
+  if (m == 0) return false;
+
+  out.r = out.N.transpose() * (xa - b.x);
+  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(n, 3);  // ∂T(x_a)/∂(θ, t_x, t_y)
+  for (int block = 0; block < layout.num_blocks(); ++block) {
+    if (!is_point(layout.kind(block))) continue;
+    const int o = layout.offset(block);
+    const Eigen::Vector2d arm = xa.segment<2>(o) - T.pivot - T.t;  // R(θ)(p − pivot)
+    D(o, 0) = -arm.y();
+    D(o + 1, 0) = arm.x();
+    D(o, 1) = 1.0;
+    D(o + 1, 2) = 1.0;
+  }
+  out.J = out.N.transpose() * D;
+
+  Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(n, n);
+  if (a.cov.size() != 0) {
+    const Eigen::MatrixXd Ra = block_rotation(layout, T.theta);
+    cov += Ra * a.cov * Ra.transpose();
+  }
+  if (b.cov.size() != 0) cov += b.cov;
+  out.S = out.N.transpose() * cov * out.N + floor_sigma * floor_sigma * Eigen::MatrixXd::Identity(m, m);
+  return true;
+}
+
+// ---- The search ---------------------------------------------------------------
+
+MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
+                         const Eigen::Vector2d& pivot, const MapMatchOptions& o) {
+  MapMatch result;
+  Chi2Table chi2(o.probability);
+
+  // Candidate partners: same type and close enough for some motion in the window.
+  std::vector<Footprint> local_fp, old_fp;
+  for (const FeatureShape& s : local) local_fp.push_back(footprint(s));
+  for (const FeatureShape& s : old) old_fp.push_back(footprint(s));
+  std::vector<std::vector<int>> partners(local.size());
+  for (std::size_t i = 0; i < local.size(); ++i) {
+    if (!local_fp[i].placed) continue;
+    const double swing = (local_fp[i].centre - pivot).norm() * std::min(o.max_rotation, std::numbers::pi);
+    for (std::size_t j = 0; j < old.size(); ++j) {
+      if (old[j].type != local[i].type || !old_fp[j].placed) continue;
+      const double reach = o.max_translation + swing + local_fp[i].radius + old_fp[j].radius;
+      if ((local_fp[i].centre - old_fp[j].centre).norm() <= reach) partners[i].push_back(static_cast<int>(j));
+    }
+  }
+
+  // 1. Hough transform: for each angle, votes of the pairs for translations.
+  const int half = static_cast<int>(std::ceil(o.max_translation / o.cell));
+  const int side = 2 * half + 1;
+  std::vector<int> votes(static_cast<std::size_t>(side * side)), stamp(votes.size());
+  const int steps = static_cast<int>(std::ceil(o.max_rotation / o.rotation_step));
+  const double half_step = 0.5 * o.rotation_step;
+  std::vector<Peak> peaks;
+  CoincidenceResidual res;
+  for (int k = -steps; k <= steps; ++k) {
+    const double theta = k * o.rotation_step;
+    std::fill(votes.begin(), votes.end(), 0);
+    std::fill(stamp.begin(), stamp.end(), -1);
+    const PlanarMotion T0{theta, Eigen::Vector2d::Zero(), pivot};
+    auto vote = [&](const Eigen::Vector2d& t, int voter) {
+      const int ci = static_cast<int>(std::lround(t.x() / o.cell)) + half;
+      const int cj = static_cast<int>(std::lround(t.y() / o.cell)) + half;
+      for (int di = -1; di <= 1; ++di)
+        for (int dj = -1; dj <= 1; ++dj) {
+          const int i = ci + di, j = cj + dj;
+          if (i < 0 || j < 0 || i >= side || j >= side) continue;
+          const std::size_t cell = static_cast<std::size_t>(i * side + j);
+          if (stamp[cell] == voter) continue;  // one vote per local feature and cell
+          stamp[cell] = voter;
+          ++votes[cell];
+        }
+    };
+    for (std::size_t i = 0; i < local.size(); ++i) {
+      for (int j : partners[i]) {
+        if (!coincidence_residual(local[i], old[static_cast<std::size_t>(j)], T0, o.floor_sigma, res)) continue;
+        // The angle grid is coarse: its half step enters as uncertainty.
+        res.S += half_step * half_step * res.J.col(0) * res.J.col(0).transpose();
+        const Eigen::MatrixXd M = res.J.rightCols(2);
+        const Eigen::LDLT<Eigen::MatrixXd> W(res.S);
+        const Eigen::Matrix2d A = M.transpose() * W.solve(M);
+        const Eigen::Vector2d g = M.transpose() * W.solve(res.r);
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(A);
+        const double l1 = es.eigenvalues()[0], l2 = es.eigenvalues()[1];
+        if (!(l2 > 0.0)) continue;  // the pair says nothing about the translation
+        const auto m = static_cast<int>(res.r.size());
+        const int voter = static_cast<int>(i);
+        if (l1 > 1e-6 * l2) {  // both directions fixed: one translation
+          const Eigen::Vector2d t = -A.ldlt().solve(g);
+          const Eigen::VectorXd e = res.r + M * t;
+          if (m > 2 && e.dot(W.solve(e)) > chi2(m - 2)) continue;
+          if (t.norm() <= o.max_translation) vote(t, voter);
+        } else {  // one direction free (e.g. along a wall): a line of translations
+          const Eigen::Vector2d u = es.eigenvectors().col(1), v = es.eigenvectors().col(0);
+          const Eigen::Vector2d t0 = -(u.dot(g) / l2) * u;
+          const Eigen::VectorXd e = res.r + M * t0;
+          if (m > 1 && e.dot(W.solve(e)) > chi2(m - 1)) continue;
+          if (t0.norm() > o.max_translation) continue;
+          const double reach = std::sqrt(o.max_translation * o.max_translation - t0.squaredNorm());
+          for (double s = -reach; s <= reach; s += 0.5 * o.cell) vote(t0 + s * v, voter);
+        }
+      }
+    }
+    for (int i = 0; i < side; ++i)
+      for (int j = 0; j < side; ++j) {
+        const int c = votes[static_cast<std::size_t>(i * side + j)];
+        if (c < o.min_matches) continue;
+        bool is_max = true;
+        for (int di = -1; di <= 1 && is_max; ++di)
+          for (int dj = -1; dj <= 1 && is_max; ++dj) {
+            const int a = i + di, b = j + dj;
+            if ((di != 0 || dj != 0) && a >= 0 && b >= 0 && a < side && b < side &&
+                votes[static_cast<std::size_t>(a * side + b)] > c)
+              is_max = false;
+          }
+        if (is_max) peaks.push_back({c, theta, Eigen::Vector2d((i - half) * o.cell, (j - half) * o.cell)});
+      }
+  }
+  std::stable_sort(peaks.begin(), peaks.end(), [](const Peak& a, const Peak& b) { return a.votes > b.votes; });
+  std::vector<Peak> kept;  // non-maximum suppression over neighbouring angles and cells
+  for (const Peak& p : peaks) {
+    bool near = false;
+    for (const Peak& q : kept)
+      near = near || (std::abs(p.theta - q.theta) <= 1.01 * o.rotation_step && (p.t - q.t).norm() <= 2.01 * o.cell);
+    if (!near) kept.push_back(p);
+    if (static_cast<int>(kept.size()) >= o.max_hypotheses) break;
+  }
+
+  // 2. Verification: pair one to one, refine the motion, test jointly.
+  auto pair_up = [&](const PlanarMotion& T, bool coarse, MapMatchHypothesis& h, Eigen::Matrix3d& H,
+                     Eigen::Vector3d& grad) {
+    std::vector<std::tuple<double, int, int>> gated;
+    std::vector<CoincidenceResidual> kept_res;
+    std::map<std::pair<int, int>, std::size_t> where;
+    for (std::size_t i = 0; i < local.size(); ++i)
+      for (int j : partners[i]) {
+        CoincidenceResidual r;
+        if (!coincidence_residual(local[i], old[static_cast<std::size_t>(j)], T, o.floor_sigma, r)) continue;
+        if (coarse) {
+          r.S += half_step * half_step * r.J.col(0) * r.J.col(0).transpose();
+          r.S += 0.25 * o.cell * o.cell * r.J.rightCols(2) * r.J.rightCols(2).transpose();
+        }
+        const double d2 = mahalanobis2(r.r, r.S);
+        if (d2 > chi2(static_cast<int>(r.r.size()))) continue;
+        gated.emplace_back(d2, static_cast<int>(i), j);
+        where[{static_cast<int>(i), j}] = kept_res.size();
+        kept_res.push_back(std::move(r));
+      }
+    std::sort(gated.begin(), gated.end());
+    std::vector<char> used_local(local.size(), 0), used_old(old.size(), 0);
+    h.pairs.clear();
+    h.d2 = 0.0;
+    int rows = 0;
+    H.setZero();
+    grad.setZero();
+    for (const auto& [d2, i, j] : gated) {
+      if (used_local[static_cast<std::size_t>(i)] || used_old[static_cast<std::size_t>(j)]) continue;
+      used_local[static_cast<std::size_t>(i)] = used_old[static_cast<std::size_t>(j)] = 1;
+      h.pairs.emplace_back(i, j);
+      h.d2 += d2;
+      const CoincidenceResidual& r = kept_res[where[{i, j}]];
+      rows += static_cast<int>(r.r.size());
+      const Eigen::LDLT<Eigen::MatrixXd> W(r.S);
+      H += r.J.transpose() * W.solve(r.J);
+      grad += r.J.transpose() * W.solve(r.r);
+    }
+    h.dof = rows - 3;
+  };
+
+  std::vector<MapMatchHypothesis> verified;
+  for (const Peak& p : kept) {
+    MapMatchHypothesis h;
+    h.motion = PlanarMotion{p.theta, p.t, pivot};
+    Eigen::Matrix3d H;
+    Eigen::Vector3d grad;
+    constexpr int kIterations = 6;
+    for (int it = 0; it < kIterations; ++it) {
+      pair_up(h.motion, it == 0, h, H, grad);
+      if (h.pairs.empty()) break;
+      const Eigen::Vector3d step = -(H + 1e-9 * Eigen::Matrix3d::Identity()).ldlt().solve(grad);
+      h.motion.theta += step[0];
+      h.motion.t += step.tail<2>();
+      if (step[0] * step[0] < 1e-10 && step.tail<2>().squaredNorm() < 1e-8) break;
+    }
+    pair_up(h.motion, false, h, H, grad);  // the pairing at the refined motion
+    if (h.pairs.empty()) continue;
+    h.jointly_compatible = h.dof > 0 && h.d2 <= chi2(h.dof);
+    const Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
+    if (ldlt.info() == Eigen::Success && ldlt.isPositive() && ldlt.vectorD().minCoeff() > 0.0) {
+      const Eigen::Matrix3d cov = ldlt.solve(Eigen::Matrix3d::Identity());
+      h.sigma_rotation = std::sqrt(std::max(0.0, cov(0, 0)));
+      h.sigma_translation =
+          std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov.bottomRightCorner<2, 2>())
+                                      .eigenvalues()[1]));
+      h.determined = h.sigma_translation <= o.max_translation_std && h.sigma_rotation <= o.max_rotation_std;
+    }
+    const bool inside = std::abs(h.motion.theta) <= o.max_rotation + o.rotation_step &&
+                        h.motion.t.norm() <= o.max_translation + o.cell;
+    if (inside) verified.push_back(std::move(h));
+  }
+  result.hypotheses = static_cast<int>(verified.size());
+
+  // 3. The best acceptable hypothesis, and its best clearly different rival.
+  auto valid = [&](const MapMatchHypothesis& h) {
+    return h.jointly_compatible && h.determined && static_cast<int>(h.pairs.size()) >= o.min_matches;
+  };
+  auto better = [&](const MapMatchHypothesis& a, const MapMatchHypothesis& b) {
+    if (valid(a) != valid(b)) return valid(a);
+    if (a.pairs.size() != b.pairs.size()) return a.pairs.size() > b.pairs.size();
+    return a.d2 < b.d2;
+  };
+  if (verified.empty()) {
+    result.reason = kept.empty() ? "no translation got " + std::to_string(o.min_matches) + " votes"
+                                 : "no hypothesis survived refinement";
+    return result;
+  }
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < verified.size(); ++i)
+    if (better(verified[i], verified[best])) best = i;
+  result.best = verified[best];
+  result.best_matches = static_cast<int>(result.best.pairs.size());
+  const double same_t = std::max(3.0 * o.cell, 0.5);
+  for (const MapMatchHypothesis& h : verified) {
+    const bool different = std::abs(h.motion.theta - result.best.motion.theta) > 2.0 * o.rotation_step ||
+                           (h.motion.t - result.best.motion.t).norm() > same_t;
+    if (different && h.jointly_compatible) result.rival_matches = std::max(result.rival_matches, static_cast<int>(h.pairs.size()));
+  }
+  if (!valid(result.best)) {
+    const MapMatchHypothesis& b = result.best;
+    if (static_cast<int>(b.pairs.size()) < o.min_matches)
+      result.reason = "best hypothesis pairs only " + std::to_string(b.pairs.size()) + " features";
+    else if (!b.jointly_compatible)
+      result.reason = "best pairing is not jointly compatible (D² " + std::to_string(b.d2) + ", " +
+                      std::to_string(b.dof) + " dof)";
+    else
+      result.reason = "best pairing does not fix the motion (σ " + std::to_string(b.sigma_translation) + " m, " +
+                      std::to_string(b.sigma_rotation * 180.0 / std::numbers::pi) + " deg)";
+    return result;
+  }
+  if (result.rival_matches >= o.ambiguity_ratio * result.best_matches) {
+    result.reason = "ambiguous: another placement pairs " + std::to_string(result.rival_matches) + " of the " +
+                    std::to_string(result.best_matches) + " features";
+    return result;
+  }
+  result.accepted = true;
+  return result;
+}
+
+}  // namespace mspace::kernel

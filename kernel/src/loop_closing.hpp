@@ -1,0 +1,129 @@
+// loop_closing.hpp — map matching for loop closure when the robot's pose is
+// too uncertain (or its covariance too optimistic) for the gate (issue 10,
+// item 3).
+//
+// When the odometry has drifted further than the association gate allows, a
+// robot that comes back to a mapped place does not re-observe the old
+// features: it maps them again. The kernel then has two copies of the place,
+// the recent one (the *local map*: features created in the last few metres of
+// travel) and the old one (features not seen for a long way). Map matching
+// looks for the planar rigid motion that lays the local map onto the old map:
+//
+//   1. hypotheses   for every rotation in the search window (a grid of
+//                   angles), every pair (local feature, old feature of the
+//                   same type) votes for the translations that make the two
+//                   coincide (a Hough transform on a grid of cells): one
+//                   translation when the pair fixes both directions (a
+//                   point), a line of them when it leaves one free (a wall
+//                   whose end points may slide along it);
+//   2. verification the strongest cells are refined by Gauss–Newton on the
+//                   three motion parameters with the local features paired
+//                   one to one to their nearest compatible old features,
+//                   and kept only if the pairing is jointly compatible —
+//                   D² = Σ rᵢᵀ Sᵢ⁻¹ rᵢ ≤ χ²(p, Σ dim rᵢ − 3), Neira & Tardós
+//                   2001 applied to the aligned maps — and fixes all three
+//                   motion parameters;
+//   3. uniqueness   a hypothesis is accepted only when no clearly different
+//                   one is nearly as good: in a symmetric building the local
+//                   map fits several places and none is taken.
+//
+// Everything is generic: a feature is seen only through its coordinate blocks
+// (mspace/coords.hpp; a rigid motion moves every point block and leaves
+// scalars alone) and its symmetry directions (Feature::symmetry_directions:
+// coordinates that may differ between two copies of the same object, e.g.
+// the unmeasured end points of a wall, which slide). The residual of a pair
+// is the difference of their coordinates with those directions projected
+// out. The kernel never names a feature type.
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "mspace/coords.hpp"
+
+namespace mspace::kernel {
+
+/// A feature as map matching sees it: its coordinates and what they leave free.
+struct FeatureShape {
+  int feature = 0;  ///< the caller's key (an index into its map)
+  int type = 0;     ///< only shapes of the same type are paired
+  const CoordLayout* layout = nullptr;
+  Eigen::VectorXd x;     ///< x_f, n coordinates
+  Eigen::MatrixXd free;  ///< n × s symmetry directions (may have no columns)
+  Eigen::MatrixXd cov;   ///< n × n covariance of x_f (B̃ P B̃ᵀ); empty: zero
+};
+
+/// A planar rigid motion about a pivot: p ↦ R(θ) (p − pivot) + pivot + t.
+struct PlanarMotion {
+  double theta = 0.0;
+  Eigen::Vector2d t = Eigen::Vector2d::Zero();
+  Eigen::Vector2d pivot = Eigen::Vector2d::Zero();
+
+  Eigen::Vector2d apply(const Eigen::Vector2d& p) const;
+  /// The coordinates `x` (with `layout`) moved: the (x, y) of every point
+  /// block; heights and scalar blocks are unchanged.
+  Eigen::VectorXd apply(const CoordLayout& layout, const Eigen::VectorXd& x) const;
+  /// Directions (columns in x_f space) rotated with the motion.
+  Eigen::MatrixXd rotate(const CoordLayout& layout, const Eigen::MatrixXd& directions) const;
+  /// The same kind of motion scaled by `fraction` (θ and t), same pivot.
+  PlanarMotion scaled(double fraction) const;
+};
+
+/// The residual of "shape a, moved by T, is the same object as shape b".
+struct CoincidenceResidual {
+  Eigen::VectorXd r;  ///< Nᵀ (T(x_a) − x_b), N an orthonormal basis of what no symmetry leaves free
+  Eigen::MatrixXd N;  ///< n × m
+  Eigen::MatrixXd S;  ///< m × m covariance of r: Nᵀ (R Σ_a Rᵀ + Σ_b) N + floor² I
+  Eigen::MatrixXd J;  ///< m × 3: ∂r/∂(θ, t_x, t_y)
+};
+
+/// The free directions of a pair: b's symmetry directions and those of a
+/// (rotated by T) that touch only blocks b leaves fixed. (Using both on one
+/// block would let two crossing lines "coincide" at their intersection.)
+/// False when nothing is left to compare (m = 0) or the layouts differ.
+bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const PlanarMotion& T, double floor_sigma,
+                          CoincidenceResidual& out);
+
+struct MapMatchOptions {
+  double max_translation = 10.0;    ///< m: the search window's radius about the current estimate
+  double max_rotation = 0.5;        ///< rad: ± this about the current estimate
+  double rotation_step = 0.0349;    ///< rad (2°): the hypothesis grid's angle step
+  double cell = 0.25;               ///< m: the translation grid's cell side
+  double floor_sigma = 0.05;        ///< m: σ added to every residual row (the local map's own distortion)
+  double probability = 0.99;        ///< pairwise gate and joint compatibility
+  int min_matches = 4;              ///< local features paired, at least
+  double ambiguity_ratio = 0.7;     ///< reject when a different hypothesis has this fraction of the matches
+  double max_translation_std = 0.1; ///< m: the pairing must fix the translation this well (1σ)
+  double max_rotation_std = 0.02;   ///< rad: and the rotation
+  int max_hypotheses = 24;          ///< grid peaks verified
+};
+
+/// One verified hypothesis.
+struct MapMatchHypothesis {
+  PlanarMotion motion;
+  std::vector<std::pair<int, int>> pairs;  ///< (position in local, position in old)
+  double d2 = 0.0;                         ///< joint D² of the pairing
+  int dof = 0;                             ///< Σ dim rᵢ − 3
+  bool jointly_compatible = false;
+  bool determined = false;  ///< the pairing fixes θ, t_x, t_y to max_*_std
+  double sigma_translation = 0.0, sigma_rotation = 0.0;
+};
+
+struct MapMatch {
+  bool accepted = false;
+  MapMatchHypothesis best;  ///< the accepted one, or the best candidate
+  int best_matches = 0;
+  int rival_matches = 0;  ///< matches of the best clearly different hypothesis
+  int hypotheses = 0;     ///< grid peaks verified
+  std::string reason;     ///< why nothing was accepted
+};
+
+/// Searches the motion that lays `local` onto `old` (rotations about `pivot`,
+/// usually the robot's position) within the window of `options`.
+MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
+                         const Eigen::Vector2d& pivot, const MapMatchOptions& options);
+
+}  // namespace mspace::kernel

@@ -1,0 +1,189 @@
+// Map matching for loop closure (kernel/src/loop_closing.cpp) on hand-built
+// maps: point features, and line segments whose unmeasured end points slide
+// (the symmetry directions a wall declares). The local map is a copy of part
+// of the old map moved by a known motion; the matcher must find the inverse
+// motion, pair the right features, and refuse when the answer is ambiguous
+// (a symmetric map), not determined (parallel lines only) or absent.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "loop_closing.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+
+const CoordLayout kPoint{BlockKind::Point2D};
+const CoordLayout kSegment{BlockKind::Point2D, BlockKind::Point2D};
+
+FeatureShape point(double x, double y) {
+  FeatureShape s;
+  s.type = 0;
+  s.layout = &kPoint;
+  s.x = Eigen::Vector2d(x, y);
+  s.free = Eigen::MatrixXd::Zero(2, 0);
+  s.cov = Eigen::Matrix2d::Identity() * 1e-4;
+  return s;
+}
+
+/// A segment from a to b; an end that is not `fixed` slides along the line.
+FeatureShape segment(Eigen::Vector2d a, Eigen::Vector2d b, bool fixed_a, bool fixed_b) {
+  FeatureShape s;
+  s.type = 1;
+  s.layout = &kSegment;
+  s.x.resize(4);
+  s.x << a, b;
+  const Eigen::Vector2d t = (b - a).normalized();
+  s.free = Eigen::MatrixXd::Zero(4, 0);
+  for (int e = 0; e < 2; ++e) {
+    if (e == 0 ? fixed_a : fixed_b) continue;
+    s.free.conservativeResize(4, s.free.cols() + 1);
+    s.free.col(s.free.cols() - 1).setZero();
+    s.free.col(s.free.cols() - 1).segment<2>(2 * e) = t;
+  }
+  s.cov = Eigen::Matrix4d::Identity() * 1e-4;
+  return s;
+}
+
+/// `shapes` moved by `T`, with independent noise of σ on every coordinate.
+std::vector<FeatureShape> moved(const std::vector<FeatureShape>& shapes, const PlanarMotion& T, double sigma,
+                                std::mt19937& rng) {
+  std::normal_distribution<double> noise(0.0, sigma);
+  std::vector<FeatureShape> out;
+  for (const FeatureShape& s : shapes) {
+    FeatureShape m = s;
+    m.x = T.apply(*s.layout, s.x);
+    for (Eigen::Index i = 0; i < m.x.size(); ++i) m.x[i] += noise(rng);
+    m.free = T.rotate(*s.layout, s.free);
+    out.push_back(m);
+  }
+  return out;
+}
+
+/// An office-like room: four walls with real corners, a door gap, a pillar row.
+std::vector<FeatureShape> room(Eigen::Vector2d origin) {
+  const Eigen::Vector2d o = origin;
+  std::vector<FeatureShape> s;
+  s.push_back(segment(o + Eigen::Vector2d(0, 0), o + Eigen::Vector2d(7, 0), true, true));
+  s.push_back(segment(o + Eigen::Vector2d(7, 0), o + Eigen::Vector2d(7, 4), true, false));
+  s.push_back(segment(o + Eigen::Vector2d(7, 4), o + Eigen::Vector2d(3, 4), false, true));
+  s.push_back(segment(o + Eigen::Vector2d(2, 4), o + Eigen::Vector2d(0, 4), true, true));
+  s.push_back(segment(o + Eigen::Vector2d(0, 4), o + Eigen::Vector2d(0, 0), false, true));
+  s.push_back(point(o.x() + 2.0, o.y() + 2.0));
+  s.push_back(point(o.x() + 5.5, o.y() + 1.0));
+  return s;
+}
+
+/// The motion that undoes `T` (both about the same pivot).
+PlanarMotion inverse(const PlanarMotion& T) {
+  PlanarMotion inv{-T.theta, Eigen::Vector2d::Zero(), T.pivot};
+  inv.t = -(inv.apply(T.pivot + T.t) - T.pivot);
+  return inv;
+}
+
+TEST(MapMatching, CoincidenceOfCrossingLinesIsNotFree) {
+  // Two lines through the same point at 90°, both ends sliding: if the free
+  // directions of both were used on each end, any two lines would coincide.
+  const FeatureShape a = segment({-1, 0}, {1, 0}, false, false);
+  const FeatureShape b = segment({0, -1}, {0, 1}, false, false);
+  CoincidenceResidual r;
+  ASSERT_TRUE(coincidence_residual(a, b, PlanarMotion{}, 0.0, r));
+  EXPECT_EQ(r.r.size(), 2);  // the normal offsets of b's two ends
+  EXPECT_GT(r.r.norm(), 0.5);
+  // The same line, its ends elsewhere along it, coincides exactly.
+  const FeatureShape c = segment({-3, 0}, {5, 0}, false, false);
+  ASSERT_TRUE(coincidence_residual(a, c, PlanarMotion{}, 0.0, r));
+  EXPECT_NEAR(r.r.norm(), 0.0, 1e-12);
+  // A measured end counts along the line too.
+  const FeatureShape d = segment({-3, 0}, {5, 0}, true, false);
+  const FeatureShape e = segment({-1, 0}, {5, 0}, true, false);
+  ASSERT_TRUE(coincidence_residual(d, e, PlanarMotion{}, 0.0, r));
+  EXPECT_NEAR(r.r.norm(), 2.0, 1e-12);
+}
+
+TEST(MapMatching, RecoversTheMotionOfADriftedLocalMap) {
+  std::mt19937 rng(7);
+  std::vector<FeatureShape> old = room({0, 0});
+  for (const FeatureShape& s : room({9, 0})) old.push_back(s);  // a room like it beside it, three of
+  old.erase(old.begin() + 7, old.begin() + 10);                  // its walls missing: it pairs 4 of 7
+  old.push_back(point(12.0, 3.2));
+  for (int trial = 0; trial < 5; ++trial) {
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const PlanarMotion drift{0.25 * u(rng), Eigen::Vector2d(4.0 * u(rng), 4.0 * u(rng)), Eigen::Vector2d(3.5, 2.0)};
+    const std::vector<FeatureShape> first_room(old.begin(), old.begin() + 7);
+    const std::vector<FeatureShape> local = moved(first_room, drift, 0.01, rng);
+    MapMatchOptions o;
+    o.max_translation = 8.0;
+    o.max_rotation = 0.3;
+    const MapMatch m = match_local_map(local, old, drift.pivot, o);
+    ASSERT_TRUE(m.accepted) << "trial " << trial << ": " << m.reason;
+    const PlanarMotion want = inverse(drift);
+    EXPECT_NEAR(m.best.motion.theta, want.theta, 0.01) << "trial " << trial;
+    EXPECT_NEAR((m.best.motion.t - want.t).norm(), 0.0, 0.05) << "trial " << trial;
+    ASSERT_EQ(m.best.pairs.size(), 7u);
+    for (const auto& [i, j] : m.best.pairs) EXPECT_EQ(i, j);
+  }
+}
+
+TEST(MapMatching, RefusesASymmetricMap) {
+  // The same room twice, 9 m apart: the local copy fits both.
+  std::mt19937 rng(3);
+  std::vector<FeatureShape> old = room({0, 0});
+  for (const FeatureShape& s : room({9, 0})) old.push_back(s);
+  const std::vector<FeatureShape> first_room(old.begin(), old.begin() + 7);
+  const PlanarMotion drift{0.05, Eigen::Vector2d(1.0, -0.5), Eigen::Vector2d(3.5, 2.0)};
+  const std::vector<FeatureShape> local = moved(first_room, drift, 0.01, rng);
+  MapMatchOptions o;
+  o.max_translation = 12.0;
+  o.max_rotation = 0.2;
+  MapMatch m = match_local_map(local, old, drift.pivot, o);
+  EXPECT_FALSE(m.accepted);
+  EXPECT_EQ(m.best_matches, 7);
+  EXPECT_EQ(m.rival_matches, 7);
+  EXPECT_NE(m.reason.find("ambiguous"), std::string::npos) << m.reason;
+  // A window that the drift bounds (2 m) holds one placement only.
+  o.max_translation = 2.0;
+  m = match_local_map(local, old, drift.pivot, o);
+  ASSERT_TRUE(m.accepted) << m.reason;
+  EXPECT_NEAR((m.best.motion.t - inverse(drift).t).norm(), 0.0, 0.05);
+}
+
+TEST(MapMatching, RefusesParallelWallsThatLeaveTheMotionFree) {
+  // A corridor: two long parallel walls with sliding ends fix the rotation
+  // and the offset across it, never the position along it.
+  std::mt19937 rng(5);
+  std::vector<FeatureShape> old;
+  for (double x0 : {0.0, 12.0}) {
+    old.push_back(segment({x0, 0}, {x0 + 10, 0}, false, false));
+    old.push_back(segment({x0 + 10, 2}, {x0, 2}, false, false));
+  }
+  const std::vector<FeatureShape> local =
+      moved({old[0], old[1], old[2], old[3]}, PlanarMotion{0.02, Eigen::Vector2d(0.7, 0.3), {5, 1}}, 0.005, rng);
+  MapMatchOptions o;
+  o.min_matches = 2;
+  const MapMatch m = match_local_map(local, old, {5, 1}, o);
+  EXPECT_FALSE(m.accepted);
+  EXPECT_NE(m.reason.find("does not fix"), std::string::npos) << m.reason;
+}
+
+TEST(MapMatching, FindsNothingWhereThereIsNothing) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 15.0);
+  std::vector<FeatureShape> old, local;
+  for (int i = 0; i < 25; ++i) old.push_back(point(u(rng), u(rng)));
+  for (int i = 0; i < 8; ++i) local.push_back(point(u(rng), u(rng)));
+  MapMatchOptions o;
+  o.max_translation = 5.0;
+  o.max_rotation = 0.3;
+  const MapMatch m = match_local_map(local, old, {7, 7}, o);
+  EXPECT_FALSE(m.accepted) << m.best_matches << " matches";
+}
+
+}  // namespace
