@@ -527,8 +527,8 @@ void Associator::features_in_range(const AssociationView& map, const SensorSlot&
                                    std::vector<int>& out) {
   out.clear();
   const double range = sensor.config.max_range;
-  const auto fed = [&](const MapFeature& mf) {
-    return std::find(sensor.feeds.begin(), sensor.feeds.end(), mf.type) != sensor.feeds.end();
+  const auto fed = [&](const MapFeature& mf) {  // a duplicate found by a loop closure is never matched again
+    return mf.merged_into == 0 && std::find(sensor.feeds.begin(), sensor.feeds.end(), mf.type) != sensor.feeds.end();
   };
   if (!(range > 0.0) || !config_.spatial_index) {  // the full scan
     for (std::size_t fi = 0; fi < map.features.size(); ++fi) {

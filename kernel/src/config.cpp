@@ -33,7 +33,10 @@ const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "pl
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
                                                    "join_distance", "method", "jcbb_max_nodes", "spatial_index",
-                                                   "index_cell_size"};
+                                                   "index_cell_size", "loop_closing", "loop_local_path",
+                                                   "loop_min_gap_path", "loop_drift_per_metre",
+                                                   "loop_drift_deg_per_metre", "loop_min_matches",
+                                                   "loop_ambiguity_ratio"};
 const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir", "trajectory", "map", "summary", "picture", "picture_size"};
@@ -439,6 +442,15 @@ AssociationConfig Reader::read_association(const Item* item) const {
   if (const Item* f = find(fields, "jcbb_max_nodes")) association.jcbb_max_nodes = integer(*f, 1);
   if (const Item* f = find(fields, "spatial_index")) association.spatial_index = boolean(*f);
   if (const Item* f = find(fields, "index_cell_size")) association.index_cell_size = number(*f, 0.0);
+  if (const Item* f = find(fields, "loop_closing")) association.loop_closing = boolean(*f);
+  if (const Item* f = find(fields, "loop_local_path")) association.loop_local_path = number(*f, 0.1);
+  if (const Item* f = find(fields, "loop_min_gap_path")) association.loop_min_gap_path = number(*f, 0.0);
+  if (const Item* f = find(fields, "loop_drift_per_metre")) association.loop_drift_per_metre = number(*f, 0.0, 1.0);
+  if (const Item* f = find(fields, "loop_drift_deg_per_metre"))
+    association.loop_drift_deg_per_metre = number(*f, 0.0, 10.0);
+  if (const Item* f = find(fields, "loop_min_matches")) association.loop_min_matches = static_cast<int>(integer(*f, 3, 1000));
+  if (const Item* f = find(fields, "loop_ambiguity_ratio"))
+    association.loop_ambiguity_ratio = number(*f, 0.1, 1.0);
   return association;
 }
 
@@ -596,6 +608,14 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "jcbb_max_nodes" << YAML::Value << std::to_string(c.association.jcbb_max_nodes);
   out << YAML::Key << "spatial_index" << YAML::Value << yes_no(c.association.spatial_index);
   out << YAML::Key << "index_cell_size" << YAML::Value << format_number(c.association.index_cell_size);
+  out << YAML::Key << "loop_closing" << YAML::Value << yes_no(c.association.loop_closing);
+  out << YAML::Key << "loop_local_path" << YAML::Value << format_number(c.association.loop_local_path);
+  out << YAML::Key << "loop_min_gap_path" << YAML::Value << format_number(c.association.loop_min_gap_path);
+  out << YAML::Key << "loop_drift_per_metre" << YAML::Value << format_number(c.association.loop_drift_per_metre);
+  out << YAML::Key << "loop_drift_deg_per_metre" << YAML::Value
+      << format_number(c.association.loop_drift_deg_per_metre);
+  out << YAML::Key << "loop_min_matches" << YAML::Value << std::to_string(c.association.loop_min_matches);
+  out << YAML::Key << "loop_ambiguity_ratio" << YAML::Value << format_number(c.association.loop_ambiguity_ratio);
   out << YAML::EndMap;
 
   out << YAML::Key << "initial_pose" << YAML::Value << YAML::BeginMap;

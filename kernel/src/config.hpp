@@ -90,6 +90,24 @@ struct AssociationConfig {
   /// (same result); false scans everything.
   bool spatial_index = true;
   double index_cell_size = 0.0;  ///< m, the grid's cell side; 0 = the largest sensors.<name>.max_range
+  /// Map matching for loop closure (loop_closing.hpp): when features created
+  /// in the last loop_local_path metres of travel (the local map) fit
+  /// features last seen more than loop_min_gap_path metres ago (the old map)
+  /// after a planar motion, uniquely and jointly compatibly, the two copies
+  /// are declared one (coincidence factors for a re-linearising estimator,
+  /// one EKF update otherwise).
+  bool loop_closing = false;
+  double loop_local_path = 15.0;  ///< m of travel
+  double loop_min_gap_path = 30.0;  ///< m of travel
+  /// The search window: 3σ of the robot's position (heading) plus this
+  /// fraction of the path travelled since the old features were last seen
+  /// (degrees per metre of it) — the drift the odometry may have had.
+  double loop_drift_per_metre = 0.05;
+  double loop_drift_deg_per_metre = 0.5;
+  int loop_min_matches = 6;  ///< local features paired with old ones, at least
+  /// A hypothesis is refused when a clearly different one pairs this
+  /// fraction of its features (a symmetric building).
+  double loop_ambiguity_ratio = 0.7;
 };
 
 /// "nearest_neighbour" or "jcbb".

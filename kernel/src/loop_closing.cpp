@@ -178,8 +178,13 @@ bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const Pl
 // ---- The search ---------------------------------------------------------------
 
 MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
-                         const Eigen::Vector2d& pivot, const MapMatchOptions& o) {
+                         const Eigen::Vector2d& pivot, const MapMatchOptions& options) {
   MapMatch result;
+  // Hypotheses come from the enlarged window (rivals); the accepted one must
+  // lie in the window itself.
+  MapMatchOptions o = options;
+  o.max_translation *= std::max(1.0, options.rival_window_factor);
+  o.max_rotation = std::min(std::numbers::pi, o.max_rotation * std::max(1.0, options.rival_window_factor));
   Chi2Table chi2(o.probability);
 
   // Candidate partners: same type and close enough for some motion in the window.
@@ -268,7 +273,12 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
         if (is_max) peaks.push_back({c, theta, Eigen::Vector2d((i - half) * o.cell, (j - half) * o.cell)});
       }
   }
-  std::stable_sort(peaks.begin(), peaks.end(), [](const Peak& a, const Peak& b) { return a.votes > b.votes; });
+  // Most votes first; among equals (a ridge along a corridor) the smallest
+  // motion, which the prior favours.
+  std::stable_sort(peaks.begin(), peaks.end(), [](const Peak& a, const Peak& b) {
+    if (a.votes != b.votes) return a.votes > b.votes;
+    return a.t.norm() + std::abs(a.theta) < b.t.norm() + std::abs(b.theta);
+  });
   std::vector<Peak> kept;  // non-maximum suppression over neighbouring angles and cells
   for (const Peak& p : peaks) {
     bool near = false;
@@ -353,11 +363,17 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
   result.hypotheses = static_cast<int>(verified.size());
 
   // 3. The best acceptable hypothesis, and its best clearly different rival.
+  const int needed = std::max(o.min_matches, static_cast<int>(std::ceil(o.min_fraction * static_cast<double>(local.size()))));
+  auto in_window = [&](const MapMatchHypothesis& h) {
+    return std::abs(h.motion.theta) <= options.max_rotation + o.rotation_step &&
+           h.motion.t.norm() <= options.max_translation + o.cell;
+  };
   auto valid = [&](const MapMatchHypothesis& h) {
-    return h.jointly_compatible && h.determined && static_cast<int>(h.pairs.size()) >= o.min_matches;
+    return h.jointly_compatible && h.determined && static_cast<int>(h.pairs.size()) >= needed && in_window(h);
   };
   auto better = [&](const MapMatchHypothesis& a, const MapMatchHypothesis& b) {
     if (valid(a) != valid(b)) return valid(a);
+    if (in_window(a) != in_window(b)) return in_window(a);
     if (a.pairs.size() != b.pairs.size()) return a.pairs.size() > b.pairs.size();
     return a.d2 < b.d2;
   };
@@ -379,11 +395,15 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
   }
   if (!valid(result.best)) {
     const MapMatchHypothesis& b = result.best;
-    if (static_cast<int>(b.pairs.size()) < o.min_matches)
-      result.reason = "best hypothesis pairs only " + std::to_string(b.pairs.size()) + " features";
+    if (static_cast<int>(b.pairs.size()) < needed)
+      result.reason = "best hypothesis pairs only " + std::to_string(b.pairs.size()) + " of " +
+                      std::to_string(local.size()) + " features (" + std::to_string(needed) + " needed)";
     else if (!b.jointly_compatible)
       result.reason = "best pairing is not jointly compatible (D² " + std::to_string(b.d2) + ", " +
                       std::to_string(b.dof) + " dof)";
+    else if (!in_window(b))
+      result.reason = "the best placement (" + std::to_string(b.motion.t.norm()) + " m, " +
+                      std::to_string(b.motion.theta * 180.0 / std::numbers::pi) + " deg) lies outside the window";
     else
       result.reason = "best pairing does not fix the motion (σ " + std::to_string(b.sigma_translation) + " m, " +
                       std::to_string(b.sigma_rotation * 180.0 / std::numbers::pi) + " deg)";

@@ -24,8 +24,9 @@
 //                   2001 applied to the aligned maps — and fixes all three
 //                   motion parameters;
 //   3. uniqueness   a hypothesis is accepted only when no clearly different
-//                   one is nearly as good: in a symmetric building the local
-//                   map fits several places and none is taken.
+//                   one is nearly as good, searched in a window twice as
+//                   large: in a symmetric building the local map fits
+//                   several places and none is taken.
 //
 // Everything is generic: a feature is seen only through its coordinate blocks
 // (mspace/coords.hpp; a rigid motion moves every point block and leaves
@@ -95,10 +96,19 @@ struct MapMatchOptions {
   double floor_sigma = 0.05;        ///< m: σ added to every residual row (the local map's own distortion)
   double probability = 0.99;        ///< pairwise gate and joint compatibility
   int min_matches = 4;              ///< local features paired, at least
+  /// …and at least this fraction of the local map: a revisit makes most of
+  /// it duplicates, while a periodic corridor in new territory lines up a
+  /// few doors with older ones.
+  double min_fraction = 0.5;
   double ambiguity_ratio = 0.7;     ///< reject when a different hypothesis has this fraction of the matches
   double max_translation_std = 0.1; ///< m: the pairing must fix the translation this well (1σ)
   double max_rotation_std = 0.02;   ///< rad: and the rotation
   int max_hypotheses = 24;          ///< grid peaks verified
+  /// Rivals are looked for in a window this many times larger than the one
+  /// a hypothesis must lie in: where the structure repeats (a ladder of
+  /// corridors, rooms in a row), a window that happens to hold one copy
+  /// and not the next must not make the one it holds look unique.
+  double rival_window_factor = 2.0;
 };
 
 /// One verified hypothesis.

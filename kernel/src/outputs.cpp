@@ -220,6 +220,19 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "jcbb_readings" << YAML::Value << as.jcbb_readings;
   y << YAML::Key << "jcbb_nodes" << YAML::Value << as.jcbb_nodes;
   y << YAML::Key << "jcbb_bounded" << YAML::Value << as.jcbb_bounded;
+  if (slam.config().association.loop_closing) {
+    y << YAML::Key << "loop_closing" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "searches" << YAML::Value << st.loop_attempts;
+    y << YAML::Key << "closures" << YAML::Value << st.loop_closures;
+    y << YAML::Key << "refused_ambiguous" << YAML::Value << st.loop_ambiguous;
+    y << YAML::Key << "features_merged" << YAML::Value << st.loop_merged;
+    if (st.loop_checked > 0) {
+      y << YAML::Key << "checked_against_ground_truth" << YAML::Value << st.loop_checked;
+      y << YAML::Key << "false_closures" << YAML::Value << st.loop_false;
+      y << YAML::Key << "worst_disagreement_m" << YAML::Value << st.loop_worst_disagreement;
+    }
+    y << YAML::EndMap;
+  }
   y << YAML::EndMap;
   y << YAML::Key << "features" << YAML::Value << YAML::BeginMap;
   for (const auto& [type, by_dim] : s.features_by_dim) {
@@ -236,6 +249,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "update" << YAML::Value << st.seconds_update;
   y << YAML::Key << "dense_information" << YAML::Value << st.seconds_dense;
   y << YAML::Key << "extend" << YAML::Value << st.seconds_extend;
+  y << YAML::Key << "loop_closing" << YAML::Value << st.seconds_loops;
   y << YAML::EndMap;
   // The health report of every sensor (kernel/src/sensor_health.hpp).
   y << YAML::Key << "sensors" << YAML::Value << YAML::BeginMap;
@@ -320,6 +334,14 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   if (as.jcbb_readings > 0)
     os << "  joint compatibility: " << as.jcbb_readings << " readings, " << as.jcbb_nodes << " tree nodes, "
        << as.jcbb_bounded << " gave up at jcbb_max_nodes (nearest neighbour used)\n";
+  if (slam.config().association.loop_closing)
+    os << "  loop closing by map matching: " << st.loop_closures << " closures (" << st.loop_merged
+       << " features merged) in " << st.loop_attempts << " searches, " << st.loop_ambiguous
+       << " refused as ambiguous";
+  if (st.loop_checked > 0)
+    os << "; against the ground truth " << st.loop_false << " of " << st.loop_checked
+       << " false (worst disagreement " << st.loop_worst_disagreement << " m)";
+  if (slam.config().association.loop_closing) os << "\n";
   os << "  state dimension " << s.state_dimension << "\n";
   for (const auto& [type, by_dim] : s.features_by_dim) {
     os << "  features '" << type << "':";
@@ -328,11 +350,13 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     os << "\n";
   }
   const double total = st.seconds_source + st.seconds_predict + st.seconds_extract + st.seconds_associate +
-                       st.seconds_update + st.seconds_dense + st.seconds_extend;
+                       st.seconds_update + st.seconds_dense + st.seconds_extend + st.seconds_loops;
   os << "  time: source " << st.seconds_source << " s, predict " << st.seconds_predict << " s, extract "
      << st.seconds_extract << " s, associate "
      << st.seconds_associate << " s, update " << st.seconds_update << " s, dense " << st.seconds_dense
-     << " s, extend " << st.seconds_extend << " s (total " << total << " s)\n";
+     << " s, extend " << st.seconds_extend << " s";
+  if (st.seconds_loops > 0.0) os << ", loop closing " << st.seconds_loops << " s";
+  os << " (total " << total << " s)\n";
   if (s.errors) {
     const TrajectoryErrors& e = *s.errors;
     os << "  vs ground truth (" << e.matched << " poses): ATE RMSE " << e.ate_rmse << " m (median " << e.ate_median

@@ -15,8 +15,10 @@ struct Problem::Factor {
   FactorKind kind = FactorKind::Linear;
   bool live = false;    ///< observation: re-linearised in full (else its last linearisation)
   bool robust = false;  ///< an observation (live or frozen)
-  // observation
+  // observation (and coincidence: feature_id and other_id, sigma)
   int feature_id = 0;
+  int other_id = 0;
+  double sigma = 0.0;
   std::shared_ptr<Feature> feature;
   int type = 0;
   Measurement m;
@@ -483,6 +485,7 @@ bool Problem::linearize(int i, FactorLinearization& out) {
   sync_rows();
   Factor& f = *factors_[static_cast<std::size_t>(i)];
   if (f.kind == FactorKind::Motion) return evaluate_motion(f, out);
+  if (f.kind == FactorKind::Coincidence) return evaluate_coincidence(f, out);
   // The frozen-factor rule, checked again here: a feature that changed its
   // M-space since the factor was recorded no longer re-linearises it.
   if (f.live && f.feature->mspace_dim() != f.dim) freeze(f);
@@ -513,6 +516,126 @@ void Problem::retract(const Eigen::VectorXd& delta) {
     const FeatureTypeSlot& type = (*c_.types)[static_cast<std::size_t>(mf.type)];
     guarded(type.instance, *type.library, "apply_perturbation", [&] { mf.feature->apply_perturbation(dx_p); });
   }
+}
+
+// ---- loop closure ------------------------------------------------------------
+
+namespace {
+
+/// A feature as loop_closing.hpp compares it (no covariance: the factor's
+/// own σ stands for it).
+FeatureShape shape_for_coincidence(const MapFeature& mf) {
+  FeatureShape s;
+  s.layout = &mf.feature->layout();
+  s.x = mf.feature->coords();
+  s.free = mf.feature->symmetry_directions();
+  if (s.free.cols() == 0) s.free = Eigen::MatrixXd::Zero(s.x.size(), 0);
+  return s;
+}
+
+const MapFeature* find_feature(const std::vector<MapFeature>& features, int id) {
+  for (const MapFeature& mf : features)
+    if (mf.id == id) return &mf;
+  return nullptr;
+}
+
+}  // namespace
+
+void Problem::warp(const std::function<std::optional<PlanarMotion>(std::size_t record)>& node_motion,
+                   const PlanarMotion& current, const std::vector<std::pair<int, PlanarMotion>>& features) {
+  sync_rows();
+  const auto moved_pose = [&](const Pose6& x, const PlanarMotion& T) {
+    Pose6 y = x;
+    y.head<2>() = T.apply(Eigen::Vector2d(x.head<2>()));
+    y[kTheta] = wrap_angle(x[kTheta] + T.theta);
+    return y;
+  };
+  const auto pose_delta = [&](const Pose6& from, const Pose6& to) {
+    Eigen::VectorXd d(k_);
+    const Pose6 diff = to - from;
+    for (int j = 0; j < k_; ++j) {
+      const int a = c_.dofs[static_cast<std::size_t>(j)];
+      d[j] = a >= kTheta ? wrap_angle(diff[a]) : diff[a];
+    }
+    return d;
+  };
+  std::vector<std::pair<MapFeature*, Eigen::VectorXd>> targets;
+  for (const auto& [index, T] : features) {
+    MapFeature& mf = (*c_.features)[static_cast<std::size_t>(index)];
+    if (mf.state_idx.empty()) continue;
+    targets.emplace_back(&mf, T.apply(mf.feature->layout(), mf.feature->coords()));
+  }
+  // Poses move exactly in one retraction (they are added coordinate-wise);
+  // features through their M-space, whose B changes as they turn.
+  constexpr int kPasses = 5;
+  for (int pass = 0; pass < kPasses; ++pass) {
+    Eigen::VectorXd delta = Eigen::VectorXd::Zero(tangent_dim());
+    if (pass == 0) {
+      for (int node = 0; node < num_pose_nodes(); ++node) {
+        const int first = pose_node_index(node);
+        if (first == 0) continue;
+        const std::optional<PlanarMotion> T = node_motion(records_[static_cast<std::size_t>(node)]);
+        if (!T) continue;
+        const Pose6& x = nodes_[static_cast<std::size_t>(node)];
+        delta.segment(first, k_) = pose_delta(x, moved_pose(x, *T));
+      }
+      delta.head(k_) = pose_delta(*c_.x_r, moved_pose(*c_.x_r, current));
+    }
+    std::vector<char> assigned(static_cast<std::size_t>(state_dim()), 0);
+    for (const auto& [mf, target] : targets) {
+      const Eigen::VectorXd dx_p = mf->feature->B() * (target - mf->feature->coords());  // eq. 10
+      for (std::size_t j = 0; j < mf->state_idx.size(); ++j) {
+        const int row = mf->state_idx[j];
+        if (assigned[static_cast<std::size_t>(row)]) continue;  // a shared coordinate: its first member moves it
+        assigned[static_cast<std::size_t>(row)] = 1;
+        delta[row] = dx_p[static_cast<Eigen::Index>(j)];
+      }
+    }
+    retract(delta);
+  }
+}
+
+void Problem::coincide(int a, int b, double sigma) {
+  if (!(sigma > 0.0)) throw std::invalid_argument("problem: a coincidence factor needs σ > 0");
+  auto f = std::make_unique<Factor>();
+  f->kind = FactorKind::Coincidence;
+  f->feature_id = a;
+  f->other_id = b;
+  f->sigma = sigma;
+  factors_.push_back(std::move(f));
+  ++loop_closures_;
+}
+
+bool Problem::evaluate_coincidence(const Factor& f, FactorLinearization& out) const {
+  out = {};
+  const MapFeature* a = find_feature(*c_.features, f.feature_id);
+  const MapFeature* b = find_feature(*c_.features, f.other_id);
+  if (a == nullptr || b == nullptr || a->state_idx.empty() || b->state_idx.empty()) return false;
+  CoincidenceResidual r;
+  if (!coincidence_residual(shape_for_coincidence(*a), shape_for_coincidence(*b), PlanarMotion{}, 0.0, r))
+    return false;
+  out.kind = FactorKind::Coincidence;
+  out.eta = r.r;
+  const auto m = r.r.size();
+  out.C = f.sigma * f.sigma * Eigen::MatrixXd::Identity(m, m);
+  // J = Nᵀ (B̃_a  −B̃_b) over the union of both features' rows (a shared
+  // coordinate of both adds its two columns).
+  std::vector<int> idx = a->state_idx;
+  for (int row : b->state_idx)
+    if (std::find(idx.begin(), idx.end(), row) == idx.end()) idx.push_back(row);
+  out.J = Eigen::MatrixXd::Zero(m, static_cast<Eigen::Index>(idx.size()));
+  const auto add = [&](const MapFeature& mf, double sign) {
+    const Eigen::MatrixXd J = sign * r.N.transpose() * mf.feature->B_dual();
+    for (std::size_t j = 0; j < mf.state_idx.size(); ++j) {
+      const auto col = std::find(idx.begin(), idx.end(), mf.state_idx[j]) - idx.begin();
+      out.J.col(col) += J.col(static_cast<Eigen::Index>(j));
+    }
+  };
+  add(*a, 1.0);
+  add(*b, -1.0);
+  out.idx = std::move(idx);
+  out.robust = false;
+  return true;
 }
 
 }  // namespace mspace::kernel

@@ -30,7 +30,9 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -40,6 +42,7 @@
 #include "mspace/motion_model.hpp"
 #include "mspace/problem.hpp"
 #include "evaluation.hpp"
+#include "loop_closing.hpp"
 #include "plugin_registry.hpp"
 
 namespace mspace::kernel {
@@ -97,6 +100,24 @@ class Problem final : public NonlinearProblem {
   void joined(const MapFeature& a, const MapFeature& b, std::vector<int> obsolete);
   /// Estimator rows `rows` (sorted) were removed; later rows shift down.
   void removed(const std::vector<int>& rows);
+  // ---- loop closure (Slam::close_loops, loop_closing.hpp) ---------------------
+  /// A first guess after a loop closure: pose node i moves by
+  /// node_motion(record of node i) (none: stays), the current pose by
+  /// `current`, and every listed feature (index into the map) rigidly by its
+  /// motion — through the retraction (eq. 24) with δx_p = B (x_target − x_f),
+  /// repeated so that large rotations land (B is re-evaluated each time).
+  void warp(const std::function<std::optional<PlanarMotion>(std::size_t record)>& node_motion,
+            const PlanarMotion& current, const std::vector<std::pair<int, PlanarMotion>>& features);
+  /// A coincidence factor: features `a` and `b` (ids) are one object,
+  /// r = Nᵀ (x_a − x_b) ~ N(0, σ² I) with N the directions no symmetry of
+  /// theirs leaves free (coincidence_residual), re-evaluated at every
+  /// linearisation: J = Nᵀ (B̃_a  −B̃_b).
+  void coincide(int a, int b, double sigma);
+  /// Loop closures recorded (NonlinearProblem::loop_closures).
+  int loop_closures() const override { return loop_closures_; }
+  /// Trajectory index of pose node `node`.
+  std::size_t node_record(int node) const { return records_[static_cast<std::size_t>(node)]; }
+
   /// End of a step: when it added a pose node (or at the end of the data,
   /// `end_of_data`), Estimator::relinearize(). Returns true when the
   /// estimator moved the variables.
@@ -139,6 +160,7 @@ class Problem final : public NonlinearProblem {
   bool evaluate_observation(Factor& f, FactorLinearization& out);
   bool evaluate_motion(const Factor& f, FactorLinearization& out);
   void evaluate_linear(const Factor& f, FactorLinearization& out) const;
+  bool evaluate_coincidence(const Factor& f, FactorLinearization& out) const;
 
   Context c_;
   int k_ = 0;
@@ -151,6 +173,7 @@ class Problem final : public NonlinearProblem {
   Eigen::VectorXd acc_;  ///< accumulated perturbation of every estimator row (robot rows unused)
   std::vector<std::unique_ptr<Factor>> factors_;
   int frozen_ = 0;
+  int loop_closures_ = 0;
   // before_join()
   int join_a_ = 0, join_b_ = 0;
   Eigen::MatrixXd B_a_, B_b_;

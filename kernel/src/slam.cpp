@@ -228,6 +228,11 @@ bool Slam::step() {
   prune_tentative();
   stats_.seconds_extend += seconds_since(t0);
   if (!work.empty()) associator_.map_changed();  // features were created, extended, joined
+  if (config_.association.loop_closing && !work.empty()) {
+    t0 = Clock::now();
+    close_loops(data);
+    stats_.seconds_loops += seconds_since(t0);
+  }
 
   relinearize(false);
 
@@ -437,6 +442,10 @@ void Slam::update(std::vector<Match>& matches) {
     log_->debug("step ", step_, ": update with", used, "; robot correction ",
                 dx.head(static_cast<Eigen::Index>(dofs_.size())).transpose());
   }
+  apply_correction(dx);
+}
+
+void Slam::apply_correction(const Eigen::VectorXd& dx) {
   for (std::size_t i = 0; i < dofs_.size(); ++i) x_r_[dofs_[i]] += dx[static_cast<Eigen::Index>(i)];
   for (int a = kTheta; a <= kPsi; ++a) x_r_[a] = wrap_angle(x_r_[a]);
   if (problem_) problem_->moved(dx);
@@ -452,6 +461,7 @@ void Slam::update(std::vector<Match>& matches) {
 // ---- Phase 3: add dense information ----------------------------------------
 
 void Slam::add_dense_information(std::vector<ReadingWork>& work) {
+  int anchors = 0;  // matches with features of the old map (loop closing's window)
   for (ReadingWork& w : work) {
     const SensorView view = sensor_view(w.sensor, w.t);  // after the update
     for (const Match& match : w.matches) {
@@ -460,6 +470,9 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
       guarded(type.instance, *type.library, "add_dense_information",
               [&] { mf.feature->add_dense_information(w.measurements[match.measurement], view); });
       mf.last_seen_step = step_;
+      mf.last_seen_path = path_distance_;
+      if (mf.feature->mspace_dim() > 0 && mf.created_path < path_distance_ - config_.association.loop_min_gap_path)
+        ++anchors;
       mf.last_sensor = w.sensor;
       mf.last_seen_t = w.t;
       ++mf.times_matched;
@@ -480,6 +493,7 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
         mf.feature = std::shared_ptr<Feature>(created.release(), [library](Feature* p) { delete p; });
         mf.created_step = step_;
         mf.last_seen_step = step_;
+        mf.created_path = mf.last_seen_path = path_distance_;
         mf.last_sensor = w.sensor;
         mf.last_seen_t = w.t;
         guarded(type.instance, *type.library, "add_dense_information",
@@ -496,6 +510,8 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
       }
     }
   }
+  // Two or more old features matched at once pin the robot to the old map.
+  if (anchors >= 2) last_anchor_path_ = path_distance_;
 }
 
 // ---- Phase 4: extend -------------------------------------------------------
@@ -718,6 +734,7 @@ void Slam::prune_tentative() {
 
 void Slam::record(const DataStep& data) {
   trajectory_.push_back({data.t, x_r_, kAllPoseCoords});
+  record_path_.push_back(path_distance_);
   // The frame the ground truth refers to: the robot, or a sensor on it
   // (e.g. a GPS antenna mounted with the laser), x_r ⊕ x_rs (eq. 17).
   Mat6 J_sr = Mat6::Identity();

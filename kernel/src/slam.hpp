@@ -25,6 +25,7 @@
 #include "association.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"
+#include "loop_closing.hpp"
 #include "mspace/estimator.hpp"
 #include "mspace/extractor.hpp"
 #include "mspace/feature.hpp"
@@ -52,6 +53,12 @@ struct MapFeature {
   int last_sensor = 0;      ///< sensor of the newest evidence
   double last_seen_t = 0.0;  ///< time stamp of the newest evidence
   int times_matched = 0;
+  double created_path = 0.0;    ///< path distance (Slam) when created
+  double last_seen_path = 0.0;  ///< path distance of the newest evidence
+  /// Id of the older feature a loop closure found this one to duplicate
+  /// (0: none). It stays in the estimator, tied to that one by a
+  /// coincidence factor or the closure's update, and is no longer associated.
+  int merged_into = 0;
 };
 
 /// A coordinate block common to several features (T-RO §VI), e.g. the corner
@@ -92,6 +99,17 @@ struct RunStats {
   std::int64_t joined = 0;  ///< shared coordinates created
   std::int64_t pruned = 0;
   std::int64_t unknown_channel_readings = 0;
+  std::int64_t loop_attempts = 0;   ///< map-matching searches (loop_closing.hpp)
+  std::int64_t loop_closures = 0;   ///< accepted
+  std::int64_t loop_ambiguous = 0;  ///< refused: another placement fitted nearly as well
+  std::int64_t loop_merged = 0;     ///< features found to duplicate older ones
+  /// With ground truth: every accepted closure checked — the robot's pose
+  /// after it, relative to its poses when it last saw the old features it
+  /// paired, against the true relative poses; a median disagreement of over
+  /// 1 m or 5° is a false closure (slam_loop_closure.cpp).
+  std::int64_t loop_checked = 0;
+  std::int64_t loop_false = 0;
+  double loop_worst_disagreement = 0.0;  ///< m
   double seconds_predict = 0.0;
   double seconds_extract = 0.0;  ///< sensors' extractors (per sensor in the health reports)
   double seconds_associate = 0.0;  ///< gating, selection and keeping the spatial index in step
@@ -99,6 +117,7 @@ struct RunStats {
   double seconds_dense = 0.0;
   double seconds_extend = 0.0;
   double seconds_source = 0.0;
+  double seconds_loops = 0.0;  ///< map matching for loop closure
   /// Robot NEES at every step with ground truth, over the estimated pose
   /// coordinates the ground truth knows (nees_dof of them).
   std::vector<double> nees;
@@ -169,6 +188,11 @@ class Slam {
   void rebuild_state_idx(MapFeature& mf) const;
   void prune_tentative();
   void record(const DataStep& data);
+  /// Applies an estimator correction dx: the robot pose and every feature (eq. 24).
+  void apply_correction(const Eigen::VectorXd& dx);
+  /// Map matching of the local map against the old map (slam_loop_closure.cpp).
+  void close_loops(const DataStep& data);
+  void check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths, const DataStep& data);
   /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
   bool relinearize(bool end_of_data);
   SensorView sensor_view(int sensor_index, double t) const;
@@ -203,6 +227,14 @@ class Slam {
   std::vector<StampedPose> evaluated_;
   int ground_truth_sensor_ = -1;
   RunStats stats_;
+  std::vector<double> record_path_;  ///< path distance of every trajectory record
+  double last_loop_attempt_path_ = -1e300;
+  std::int64_t last_loop_local_signature_ = 0;  ///< the local map of the last search
+  /// Path distance of the last step that matched two or more features
+  /// created over loop_min_gap_path metres earlier: since then the robot has
+  /// seen only what it mapped itself on the way, so its drift against the
+  /// old map grew.
+  double last_anchor_path_ = 0.0;
 };
 
 }  // namespace mspace::kernel

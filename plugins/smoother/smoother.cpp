@@ -35,7 +35,7 @@ struct Normal {
   std::vector<Eigen::Triplet<double>> triplets;
   Eigen::VectorXd g;
   double cost = 0.0;
-  double by_kind[4] = {0, 0, 0, 0};  ///< ½ Σ ρ by FactorKind
+  double by_kind[kFactorKinds] = {};  ///< ½ Σ ρ by FactorKind
   int down_weighted = 0;
 };
 
@@ -152,7 +152,11 @@ bool Smoother::relinearize(NonlinearProblem& problem, bool end_of_data) {
   const double due = std::max(static_cast<double>(o_.period), o_.growth * problem.num_pose_nodes());
   const bool periodic = o_.period > 0 && static_cast<double>(since) >= due;
   const bool loop = loop_ && since >= o_.loop_spacing;
-  if (!(periodic || loop || forced_)) return false;
+  // The kernel closed a loop by map matching: it moved the variables to a
+  // first guess and added coincidence factors; optimise at once.
+  const bool closed = problem.loop_closures() != loop_closures_seen_;
+  loop_closures_seen_ = problem.loop_closures();
+  if (!(periodic || loop || forced_ || closed)) return false;
   if (loop && !periodic) ++loop_triggers_;
   optimise(problem);
   return true;
@@ -177,7 +181,7 @@ void Smoother::optimise(NonlinearProblem& problem) {
   Normal normal = build(problem, o_);
   report_.initial_cost = normal.cost;
   log_->debug("optimisation ", optimisations_ + 0, ": cost before by kind: prior ", normal.by_kind[0], ", motion ",
-              normal.by_kind[1], ", observation ", normal.by_kind[2], ", linear ", normal.by_kind[3]);
+              normal.by_kind[1], ", observation ", normal.by_kind[2], ", linear ", normal.by_kind[3], ", coincidence ", normal.by_kind[4]);
   SpMat H = assemble(normal, n, kDamping);
   Eigen::SimplicialLDLT<SpMat, Eigen::Lower> ldlt;
   ldlt.analyzePattern(H);

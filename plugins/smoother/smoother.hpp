@@ -113,6 +113,7 @@ class Smoother final : public Estimator {
   std::vector<std::int64_t> last_seen_;  ///< by state row: key_ of its last update
   bool loop_ = false;
   bool forced_ = false;
+  int loop_closures_seen_ = 0;  ///< NonlinearProblem::loop_closures() at the last relinearize()
   int optimisations_ = 0;
   int loop_triggers_ = 0;
   OptimisationReport report_;

@@ -38,7 +38,10 @@
 //                extension's new dimensions (δx_new = J_sensor δx_ms + J_own
 //                δx_p,old + w, C_new), and every observation factor whose
 //                feature has since extended or joined (frozen at its last
-//                linearisation — see docs/writing-an-estimator.md).
+//                linearisation — see docs/writing-an-estimator.md);
+//   coincidence  two features are one object (a loop closure by map
+//                matching): the difference of their coordinates with their
+//                symmetry directions projected out, re-evaluated in full.
 #pragma once
 
 #include <cstdint>
@@ -48,7 +51,9 @@
 
 namespace mspace {
 
-enum class FactorKind : std::uint8_t { Prior, Motion, Observation, Linear };
+enum class FactorKind : std::uint8_t { Prior, Motion, Observation, Linear, Coincidence };
+/// Number of FactorKind values (for per-kind tables).
+inline constexpr int kFactorKinds = 5;
 
 /// One factor linearised at the problem's current values:
 /// r ≈ eta + J · δ[idx], r ~ N(0, C).
@@ -87,6 +92,10 @@ class NonlinearProblem {
   /// with their rows of δ (shared coordinates through every member), and the
   /// kernel's current robot pose with the rows [0, k). δ has tangent_dim() rows.
   virtual void retract(const Eigen::VectorXd& delta) = 0;
+  /// Loop closures the kernel has added so far (coincidence factors from map
+  /// matching). The variables have been moved to a first guess; an estimator
+  /// that sees the count grow should re-optimise now.
+  virtual int loop_closures() const { return 0; }
 };
 
 }  // namespace mspace

@@ -1,0 +1,271 @@
+// slam_loop_closure.cpp — Slam's side of map matching (loop_closing.hpp):
+// which features form the local and the old map, the search window, and
+// what an accepted closure does to the estimate.
+//
+// After a step that created or matched features, when the robot has moved a
+// tenth of association.loop_local_path since the last search:
+//   local map  features in the estimator created within the last
+//              loop_local_path metres of travel;
+//   old map    features in the estimator created more than
+//              loop_min_gap_path metres ago (some may be tracked again
+//              already: a re-entry often re-associates a wall or two before
+//              the duplicates give the place away);
+//   window     3σ of the robot's position and heading plus the drift the
+//              odometry may have had since the robot last matched a feature
+//              older than the local map (its last anchor in the old map):
+//              loop_drift_per_metre (and _deg_per_metre) of that path.
+// An accepted closure declares each paired local feature a duplicate of its
+// old partner (MapFeature::merged_into: never associated again). With a
+// re-linearising estimator the recent trajectory and local map are first
+// moved to the closure's guess — the correction spread along the path since
+// the old map was last seen — and a coincidence factor per pair is added
+// (problem.hpp); the estimator re-optimises. An EKF gets the coincidences as
+// one update, linearised where it stands (it cannot do better).
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <sstream>
+
+#include "loop_closing.hpp"
+#include "problem.hpp"
+#include "slam.hpp"
+
+namespace mspace::kernel {
+
+namespace {
+
+/// Coincidence factors' σ: two copies of one object, to about a centimetre.
+constexpr double kCoincidenceSigma = 0.01;
+/// Hard limits of the search window, whatever the drift allowance says.
+constexpr double kMaxWindowTranslation = 30.0;  // m
+constexpr double kMaxWindowRotation = 1.05;     // rad (60°)
+/// An accepted pairing must fix the motion at least this well (1σ); the
+/// estimator then refines it with every feature's own covariance.
+constexpr double kMaxMotionSigmaTranslation = 0.3;  // m
+constexpr double kMaxMotionSigmaRotation = 0.035;   // rad (2°)
+
+/// The planar block of the robot covariance: σ of the position (largest
+/// axis) and of the heading; 0 where the state does not estimate them.
+std::pair<double, double> planar_sigmas(const Eigen::MatrixXd& P, const std::vector<int>& dofs) {
+  int ix = -1, iy = -1, it = -1;
+  for (std::size_t i = 0; i < dofs.size(); ++i) {
+    if (dofs[i] == kX) ix = static_cast<int>(i);
+    if (dofs[i] == kY) iy = static_cast<int>(i);
+    if (dofs[i] == kTheta) it = static_cast<int>(i);
+  }
+  double position = 0.0, heading = 0.0;
+  if (ix >= 0 && iy >= 0) position = std::sqrt(std::max(0.0, std::max(P(ix, ix), P(iy, iy))));
+  if (it >= 0) heading = std::sqrt(std::max(0.0, P(it, it)));
+  return {position, heading};
+}
+
+}  // namespace
+
+// A closure is right when it puts the robot where the old features say it
+// is: for each pair, the robot's pose relative to its pose when it first saw
+// the old feature (created it) must be the true relative pose (relative poses do not
+// depend on how the old map as a whole has drifted). The median over the
+// pairs is compared with 1 m and 5°.
+void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths,
+                                      const DataStep& data) {
+  if (!data.ground_truth || ground_truth_.empty()) return;
+  const auto planar = [](const Pose6& x) { return Eigen::Vector3d(x[kX], x[kY], x[kTheta]); };
+  const auto relative = [](const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
+    const double c = std::cos(from.z()), s = std::sin(from.z());
+    const Eigen::Vector2d d = to.head<2>() - from.head<2>();
+    return Eigen::Vector3d(c * d.x() + s * d.y(), -s * d.x() + c * d.y(), wrap_angle(to.z() - from.z()));
+  };
+  const Eigen::Vector3d now(T.apply(Eigen::Vector2d(x_r_.head<2>())).x(), T.apply(Eigen::Vector2d(x_r_.head<2>())).y(),
+                            wrap_angle(x_r_[kTheta] + T.theta));
+  const Eigen::Vector3d truth_now = planar(*data.ground_truth);
+  std::vector<double> position, heading;
+  for (double seen : seen_paths) {
+    const auto then = std::lower_bound(record_path_.begin(), record_path_.end(), seen);
+    if (then == record_path_.end()) continue;
+    const StampedPose& est = trajectory_[static_cast<std::size_t>(then - record_path_.begin())];
+    const auto gt = std::lower_bound(ground_truth_.begin(), ground_truth_.end(), est.t,
+                                     [](const StampedPose& g, double t) { return g.t < t; });
+    if (gt == ground_truth_.end() || std::abs(gt->t - est.t) > 1e-6) continue;
+    const Eigen::Vector3d e = relative(planar(est.pose), now) - relative(planar(gt->pose), truth_now);
+    position.push_back(e.head<2>().norm());
+    heading.push_back(std::abs(wrap_angle(e.z())));
+  }
+  if (position.empty()) return;
+  const auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  const double disagreement = median(position), heading_disagreement = median(heading);
+  ++stats_.loop_checked;
+  stats_.loop_worst_disagreement = std::max(stats_.loop_worst_disagreement, disagreement);
+  if (disagreement > 1.0 || heading_disagreement > 5.0 * std::numbers::pi / 180.0) {
+    ++stats_.loop_false;
+    log_->warn("step ", step_, ": the loop closure disagrees with the ground truth by ", disagreement, " m, ",
+               heading_disagreement * 180.0 / std::numbers::pi, " deg: a false closure");
+  }
+}
+
+void Slam::close_loops(const DataStep& data) {
+  const AssociationConfig& a = config_.association;
+  if (path_distance_ - last_loop_attempt_path_ < 0.1 * a.loop_local_path) return;
+
+  std::vector<int> local_idx, old_idx;
+  for (std::size_t i = 0; i < features_.size(); ++i) {
+    const MapFeature& mf = features_[i];
+    if (mf.merged_into != 0 || mf.state_idx.empty() || mf.feature->mspace_dim() == 0) continue;
+    if (mf.created_path >= path_distance_ - a.loop_local_path)
+      local_idx.push_back(static_cast<int>(i));
+    else if (mf.created_path <= path_distance_ - a.loop_min_gap_path)
+      old_idx.push_back(static_cast<int>(i));
+  }
+  if (static_cast<int>(local_idx.size()) < a.loop_min_matches || old_idx.empty()) return;
+  // Nothing new in the local map since the last search: same answer.
+  std::int64_t signature = static_cast<std::int64_t>(local_idx.size());
+  for (int i : local_idx) signature = signature * 1000003 + features_[static_cast<std::size_t>(i)].id;
+  if (signature == last_loop_local_signature_) return;
+  last_loop_local_signature_ = signature;
+  last_loop_attempt_path_ = path_distance_;
+
+  // The window: 3σ plus the drift the odometry may have had since the robot
+  // last matched anything older than the local map.
+  const auto [sigma_xy, sigma_theta] = planar_sigmas(estimator_->marginal(robot_idx_), dofs_);
+  const Eigen::Vector2d here = x_r_.head<2>();
+  const double unanchored = path_distance_ - last_anchor_path_;
+  MapMatchOptions o;
+  o.max_translation = std::min(kMaxWindowTranslation, 3.0 * sigma_xy + a.loop_drift_per_metre * unanchored);
+  o.max_rotation = std::min(kMaxWindowRotation, 3.0 * sigma_theta + a.loop_drift_deg_per_metre * std::numbers::pi /
+                                                                        180.0 * unanchored);
+  const double reach = a.loop_local_path + o.max_translation;
+  std::vector<int> nearby;
+  for (int i : old_idx)
+    if (planar_distance(*features_[static_cast<std::size_t>(i)].feature, here) <= reach) nearby.push_back(i);
+  if (nearby.empty()) return;
+  ++stats_.loop_attempts;
+  o.min_matches = a.loop_min_matches;
+  o.ambiguity_ratio = a.loop_ambiguity_ratio;
+  o.probability = a.gate_probability;
+  o.max_translation_std = kMaxMotionSigmaTranslation;
+  o.max_rotation_std = kMaxMotionSigmaRotation;
+
+  const auto shape = [&](int i) {
+    const MapFeature& mf = features_[static_cast<std::size_t>(i)];
+    FeatureShape s;
+    s.feature = i;
+    s.type = mf.type;
+    s.layout = &mf.feature->layout();
+    s.x = mf.feature->coords();
+    s.free = mf.feature->symmetry_directions();
+    if (s.free.cols() == 0) s.free = Eigen::MatrixXd::Zero(s.x.size(), 0);
+    const Eigen::MatrixXd Bt = mf.feature->B_dual();  // eq. 11: δx_f = B̃ δx_p
+    s.cov = Bt * estimator_->marginal(mf.state_idx) * Bt.transpose();
+    return s;
+  };
+  std::vector<FeatureShape> local, old;
+  for (int i : local_idx) local.push_back(shape(i));
+  for (int i : nearby) old.push_back(shape(i));
+  const MapMatch match = match_local_map(local, old, here, o);
+  if (!match.accepted) {
+    if (match.reason.rfind("ambiguous", 0) == 0) {
+      ++stats_.loop_ambiguous;
+      log_->info("step ", step_, ": loop closure refused, ", match.reason, " (", local.size(), " local, ", old.size(),
+                 " old features, window ", o.max_translation, " m / ", o.max_rotation * 180.0 / std::numbers::pi,
+                 " deg)");
+    } else if (log_->enabled(LogLevel::Debug)) {
+      log_->debug("step ", step_, ": map matching, ", local.size(), " local and ", old.size(), " old features: ",
+                  match.reason);
+    }
+    return;
+  }
+
+  const PlanarMotion& T = match.best.motion;
+  double loop_start = 0.0;  // where the old map was last seen: the drift grew from there
+  for (const auto& [li, oi] : match.best.pairs)
+    loop_start = std::max(loop_start, features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)]
+                                          .last_seen_path);
+  const double span = std::max(path_distance_ - loop_start, 1e-9);
+  const auto share = [&](double path) { return std::clamp((path - loop_start) / span, 0.0, 1.0); };
+  {
+    std::ostringstream what;
+    what.precision(3);
+    what << "step " << step_ << ": loop closed by map matching: " << match.best.pairs.size() << " of "
+         << local.size() << " features of the last " << a.loop_local_path << " m are older ones last seen "
+         << span << " m of travel ago; correction " << T.t.norm() << " m, " << T.theta * 180.0 / std::numbers::pi
+         << " deg (about the robot; best other placement pairs " << match.rival_matches << ")";
+    log_->info(what.str());
+  }
+  ++stats_.loop_closures;
+  stats_.loop_merged += static_cast<std::int64_t>(match.best.pairs.size());
+  {
+    std::vector<double> seen;
+    for (const auto& [li, oi] : match.best.pairs)
+      seen.push_back(features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)].created_path);
+    check_against_ground_truth(T, seen, data);
+  }
+
+  if (problem_) {
+    // A first guess: the trajectory and the features since the loop's start
+    // moved by their share of the correction.
+    std::vector<std::pair<int, PlanarMotion>> moves;
+    for (std::size_t i = 0; i < features_.size(); ++i) {
+      const MapFeature& mf = features_[i];
+      if (mf.state_idx.empty() || mf.created_path <= loop_start) continue;
+      moves.emplace_back(static_cast<int>(i), T.scaled(share(mf.created_path)));
+    }
+    problem_->warp(
+        [&](std::size_t record) -> std::optional<PlanarMotion> {
+          const double path = record < record_path_.size() ? record_path_[record] : path_distance_;
+          if (path <= loop_start) return std::nullopt;
+          return T.scaled(share(path));
+        },
+        T, moves);
+    for (const auto& [li, oi] : match.best.pairs)
+      problem_->coincide(features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)].id,
+                         features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)].id,
+                         kCoincidenceSigma);
+  } else {
+    // A filter: one update with every coincidence, linearised here.
+    std::vector<LinearizedObservation> obs;
+    for (const auto& [li, oi] : match.best.pairs) {
+      const MapFeature& fa = features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)];
+      const MapFeature& fb = features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)];
+      FeatureShape sa = local[static_cast<std::size_t>(li)], sb = old[static_cast<std::size_t>(oi)];
+      sa.cov.resize(0, 0);
+      sb.cov.resize(0, 0);
+      CoincidenceResidual r;
+      if (!coincidence_residual(sa, sb, PlanarMotion{}, 0.0, r)) continue;
+      LinearizedObservation ob;
+      ob.eta = r.r;
+      ob.C_eta = kCoincidenceSigma * kCoincidenceSigma * Eigen::MatrixXd::Identity(r.r.size(), r.r.size());
+      ob.idx = fa.state_idx;
+      for (int row : fb.state_idx)
+        if (std::find(ob.idx.begin(), ob.idx.end(), row) == ob.idx.end()) ob.idx.push_back(row);
+      ob.J = Eigen::MatrixXd::Zero(r.r.size(), static_cast<Eigen::Index>(ob.idx.size()));
+      const auto add = [&](const MapFeature& mf, double sign) {
+        const Eigen::MatrixXd J = sign * r.N.transpose() * mf.feature->B_dual();
+        for (std::size_t j = 0; j < mf.state_idx.size(); ++j)
+          ob.J.col(std::find(ob.idx.begin(), ob.idx.end(), mf.state_idx[j]) - ob.idx.begin()) +=
+              J.col(static_cast<Eigen::Index>(j));
+      };
+      add(fa, 1.0);
+      add(fb, -1.0);
+      obs.push_back(std::move(ob));
+    }
+    if (!obs.empty()) {
+      const Eigen::VectorXd dx =
+          guarded(config_.estimator.instance, *estimator_lib_, "update", [&] { return estimator_->update(obs); });
+      if (!dx.allFinite())
+        throw PluginError(config_.estimator.instance + " (plugin '" + config_.estimator.plugin +
+                          "'): update returned a non-finite state perturbation for a loop closure");
+      apply_correction(dx);
+    }
+  }
+  for (const auto& [li, oi] : match.best.pairs) {
+    MapFeature& dup = features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)];
+    MapFeature& kept = features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)];
+    dup.merged_into = kept.id;
+    kept.last_seen_path = path_distance_;
+  }
+  associator_.map_changed();
+}
+
+}  // namespace mspace::kernel

@@ -1,0 +1,96 @@
+// Loop closing by map matching (kernel/src/loop_closing.cpp,
+// slam_loop_closure.cpp) through the whole kernel on generated buildings
+// whose laser log has minute-long gaps (0.3 % chance per scan of 40–80 s
+// without scans): the robot drives on with its drifting wheel odometry and
+// comes back to mapped corridors metres off, beyond the association gate.
+// The motion noise is config/sim_building.yaml's laser-odometry one, far
+// smaller than the wheels' real drift — the overconfident filter of a real
+// log. Every accepted closure is checked against the ground truth (the
+// robot's pose relative to where it first saw the paired features, against
+// the true relative pose; > 1 m or 5° is a false closure), so a false
+// closure shows as plainly as a missed one.
+//
+// Measured (smoother, this commit): ring 1: 1 closure (8 features merged),
+// 0 false, ATE 0.371 → 0.343 m; symmetric 1 (the deliberately symmetric plan):
+// 1 closure, 0 false, 4 refused as ambiguous, ATE 1.298 → 1.408 m (the closure
+// is right but the map around it was already bent). The assertions are the
+// property (no false closure, at least one closure where the loop exists, no
+// run worse than without loop closing by more than 10 %), not those figures.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <string>
+
+#include "building_log.hpp"
+#include "config.hpp"
+#include "logging.hpp"
+#include "plugin_registry.hpp"
+#include "runner.hpp"
+#include "slam.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+namespace fs = std::filesystem;
+
+struct Outcome {
+  RunStats stats;
+  double ate = 0.0;
+};
+
+fs::path building_with_gaps(const std::string& plan) {
+  sim_building::GeneratorSettings settings;
+  settings.plan = plan;
+  settings.laser.gap_probability = 0.003;
+  settings.laser.gap_min = 40.0;
+  settings.laser.gap_max = 80.0;
+  const sim_building::Simulation sim = sim_building::simulate(settings);
+  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / (plan + "_1_gaps");
+  sim_building::write_data_set(sim, dir);
+  return dir;
+}
+
+Outcome run(const fs::path& dir, bool loop_closing) {
+  set_log_level(LogLevel::Warn);
+  setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunConfig config = load_config(fs::path(MSPACE_SOURCE_DIR) / "config" / "sim_building.yaml", registry);
+  config.source.params.set("odometry", std::string("wheel"));
+  config.association.loop_closing = loop_closing;
+  override_estimator(config, "smoother", registry);
+  Slam slam(config, registry);
+  RunOptions options;
+  options.progress = false;
+  options.write_outputs = false;
+  const RunResult r = run_to_end(slam, options);
+  Outcome out;
+  out.stats = slam.stats();
+  if (r.summary.errors) out.ate = r.summary.errors->ate_rmse;
+  return out;
+}
+
+void check(const std::string& plan, bool loop_expected) {
+  const fs::path dir = building_with_gaps(plan);
+  const Outcome without = run(dir, false);
+  const Outcome with = run(dir, true);
+  std::cout << plan << ": " << with.stats.loop_closures << " closures (" << with.stats.loop_merged
+            << " features merged) in " << with.stats.loop_attempts << " searches, " << with.stats.loop_ambiguous
+            << " refused as ambiguous, " << with.stats.loop_false << " of " << with.stats.loop_checked
+            << " false; ATE " << without.ate << " m without, " << with.ate << " m with\n";
+  EXPECT_EQ(with.stats.loop_false, 0);
+  EXPECT_EQ(with.stats.loop_checked, with.stats.loop_closures);  // every closure was checked
+  if (loop_expected) {
+    EXPECT_GE(with.stats.loop_closures, 1);
+  }
+  EXPECT_LT(with.ate, without.ate * 1.1);
+}
+
+TEST(LoopClosingRun, RingClosesItsLoopAfterALoggingGap) { check("ring", true); }
+
+TEST(LoopClosingRun, SymmetricBuildingHasNoFalseClosure) { check("symmetric", false); }
+
+}  // namespace
