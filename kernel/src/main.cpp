@@ -214,6 +214,9 @@ int main(int argc, char** argv) {
       setup_registry(registry, common);
       return run_check(check_cmd, registry, std::cout);
     }
+  } catch (const CheckUsageError& e) {
+    std::cerr << "mspace: usage error: " << e.what() << "\n";
+    return 2;
   } catch (const std::exception& e) {
     std::cerr << "mspace: error: " << e.what() << "\n";
     return 1;
