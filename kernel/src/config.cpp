@@ -643,6 +643,24 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
 
 }  // namespace
 
+std::vector<std::string> accepted_keys() {
+  std::vector<std::string> keys;
+  auto add = [&](const std::string& prefix, const std::vector<std::string>& names) {
+    for (const std::string& n : names) keys.push_back(prefix + n);
+  };
+  add("", kTopKeys);
+  add("run.", kRunKeys);
+  add("", {"source.plugin", "motion.plugin", "estimator.plugin", "features.<instance>.plugin"});
+  add("sensors.<sensor>.", kSensorKeys);
+  add("sensors.<sensor>.extractor.", {"plugin"});
+  add("association.", kAssociationKeys);
+  add("initial_pose.", kInitialPoseKeys);
+  add("output.", kOutputKeys);
+  add("output.grid.", kGridKeys);
+  add("evaluation.", kEvaluationKeys);
+  return keys;
+}
+
 const char* association_method_name(AssociationConfig::Method method) {
   return method == AssociationConfig::Method::Jcbb ? "jcbb" : "nearest_neighbour";
 }

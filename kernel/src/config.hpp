@@ -95,6 +95,13 @@ struct AssociationConfig {
 };
 
 /// "nearest_neighbour" or "jcbb".
+/// Every key the loader accepts outside plugin parameters, dotted, with
+/// <instance> and <sensor> for the names a file chooses: "run.name",
+/// "sensors.<sensor>.max_range", "output.grid.resolution", "source.plugin", …
+/// (from the same lists the loader checks against; config/README.md must
+/// document each, tests/loading).
+std::vector<std::string> accepted_keys();
+
 const char* association_method_name(AssociationConfig::Method method);
 
 /// Extra references a run is scored against (in the summary).
