@@ -47,7 +47,8 @@ void bresenham(Eigen::Vector2i a, const Eigen::Vector2i& b, Visit&& visit) {
 /// The sensor's planar pose (x, y, heading) at a scan.
 Eigen::Vector3d sensor_pose(const RangeScan& scan, const std::vector<StampedPose>& trajectory,
                             const std::vector<Pose6>& mounts) {
-  const Pose6 x_ms = compound(trajectory[scan.pose_index].pose, mounts[static_cast<std::size_t>(scan.sensor)]);  // eq. 17
+  // x_ms = x_mr ⊕ x_rs (eq. 17)
+  const Pose6 x_ms = compound(trajectory[scan.pose_index].pose, mounts[static_cast<std::size_t>(scan.sensor)]);
   return {x_ms[kX], x_ms[kY], x_ms[kTheta]};
 }
 
@@ -131,7 +132,7 @@ OccupancyGrid build_occupancy_grid(const std::vector<RangeScan>& scans, const st
 
   auto update = [&](int i, int j, float delta) {
     if (!grid.contains(i, j)) return;
-    float& l = grid.log_odds[static_cast<std::size_t>(j) * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(i)];
+    float& l = grid.log_odds[grid.index(i, j)];
     l = std::clamp(l + delta, kLogOddsMin, kLogOddsMax);
   };
   for (const RangeScan& scan : scans) {

@@ -82,7 +82,10 @@ struct OccupancyGrid {
   static constexpr double kFreeThreshold = 0.196;
   enum class Cell : std::uint8_t { Unknown, Free, Occupied };
 
-  float at(int i, int j) const { return log_odds[static_cast<std::size_t>(j) * static_cast<std::size_t>(width) + static_cast<std::size_t>(i)]; }
+  std::size_t index(int i, int j) const {
+    return static_cast<std::size_t>(j) * static_cast<std::size_t>(width) + static_cast<std::size_t>(i);
+  }
+  float at(int i, int j) const { return log_odds[index(i, j)]; }
   Cell cell(int i, int j) const;
   bool contains(int i, int j) const { return i >= 0 && j >= 0 && i < width && j < height; }
   /// The cell holding point p (may be outside the grid).

@@ -99,7 +99,8 @@ std::vector<std::filesystem::path> write_pose_files(const std::filesystem::path&
   if (slam.ground_truth().empty()) return written;
   write(dir / "ground_truth.tum", slam.ground_truth(), PoseFile::Reference);
   const std::string& sensor = slam.config().evaluation.ground_truth_sensor;
-  if (!sensor.empty()) write(dir / ("trajectory_" + sensor + ".tum"), slam.evaluated_trajectory(), PoseFile::EvaluatedSensor);
+  if (!sensor.empty())
+    write(dir / ("trajectory_" + sensor + ".tum"), slam.evaluated_trajectory(), PoseFile::EvaluatedSensor);
   return written;
 }
 

@@ -20,6 +20,7 @@
 #include "logging.hpp"
 #include "occupancy_grid.hpp"
 #include "plugin_registry.hpp"
+#include "ring_building.hpp"
 #include "runner.hpp"
 #include "slam.hpp"
 
@@ -251,14 +252,8 @@ PlanScore score(const MapServerMap& m, const sim_building::FloorPlan& plan) {
 /// grid-making alone, the run's grid adds the estimate's pose errors.
 TEST(OccupancyGrid, SimulatedBuildingGridMatchesItsFloorPlan) {
   set_log_level(LogLevel::Warn);
-  sim_building::GeneratorSettings settings;
-  settings.plan = "ring";
-  settings.route.length_m = 0.0;
-  const sim_building::Simulation sim = sim_building::simulate(settings);
   const fs::path base = fs::path(MSPACE_BINARY_DIR) / "tests" / "occupancy_grid";
-  const fs::path data = base / "ring_1";
-  sim_building::write_data_set(sim, data);
-  setenv("MSPACE_SIM_BUILDING", data.c_str(), 1);
+  const sim_building::Simulation sim = test::write_ring_building(base / "ring_1");
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
   const RunConfig config = load_config(fs::path(MSPACE_SOURCE_DIR) / "config" / "sim_building.yaml", registry);
