@@ -276,13 +276,12 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
 }
 
 void write_grid_picture(const std::filesystem::path& file, const Slam& slam, const OccupancyGrid& grid, int size_px) {
-  // The grid's extent, its longer side size_px pixels wide (or one pixel per
-  // cell when the grid is smaller). View::px counts rows from v.size, the
-  // image's height.
+  // The grid's extent, its longer side size_px pixels wide. View::px counts
+  // rows from v.size, the image's height.
   View v;
   v.margin = 10;
   const int cells = std::max(grid.width, grid.height);
-  const int inner = std::clamp(cells, 64, std::max(size_px, 64)) - 2 * v.margin;
+  const int inner = std::max(size_px, 64) - 2 * v.margin;
   v.scale = inner / (cells * grid.resolution);
   v.min_x = grid.origin.x();
   v.min_y = grid.origin.y();
