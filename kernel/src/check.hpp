@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <iosfwd>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -24,9 +25,18 @@ struct CheckCommand {
 /// or "" for any other file name.
 std::string plugin_name_of_file(const std::string& file);
 
+/// A mistake in the command, not in a plugin: a parameter the plugin needs
+/// (no default, e.g. a source's data file) given with no --param. `mspace
+/// check` reports it as a usage error (exit code 2), before any check runs.
+class CheckUsageError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
 /// Checks every target and prints one report per target to `out`. Targets
 /// that cannot be loaded count as failures. Returns 0 when everything passed,
-/// 1 otherwise (the process exit code).
+/// 1 otherwise (the process exit code). Throws CheckUsageError (see there)
+/// before checking anything.
 int run_check(const CheckCommand& command, PluginRegistry& registry, std::ostream& out);
 
 }  // namespace mspace::kernel

@@ -39,7 +39,9 @@ const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feat
                                                    "loop_ambiguity_ratio"};
 const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
-const std::vector<std::string> kOutputKeys = {"dir", "trajectory", "map", "summary", "picture", "picture_size"};
+const std::vector<std::string> kOutputKeys = {"dir",     "trajectory",   "map",         "summary",
+                                              "picture", "picture_size", "robot_frame", "grid"};
+const std::vector<std::string> kGridKeys = {"enabled", "resolution", "max_range"};
 
 std::string join(const std::vector<std::string>& items) {
   std::string out;
@@ -472,6 +474,13 @@ OutputConfig Reader::read_output(const Item* item, const std::string& run_name) 
   if (const Item* f = find(fields, "summary")) output.summary = boolean(*f);
   if (const Item* f = find(fields, "picture")) output.picture = boolean(*f);
   if (const Item* f = find(fields, "picture_size")) output.picture_size = static_cast<int>(integer(*f, 64, 20000));
+  if (const Item* f = find(fields, "robot_frame")) output.robot_frame = text(*f);
+  if (const Item* g = find(fields, "grid")) {
+    const std::vector<Item> grid = entries(*g, &kGridKeys);
+    if (const Item* f = find(grid, "enabled")) output.grid.enabled = boolean(*f);
+    if (const Item* f = find(grid, "resolution")) output.grid.resolution = number(*f, 0.005, 10.0);
+    if (const Item* f = find(grid, "max_range")) output.grid.max_range = number(*f, 0.1, 1000.0);
+  }
   return output;
 }
 
@@ -632,6 +641,12 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "summary" << YAML::Value << yes_no(c.output.summary);
   out << YAML::Key << "picture" << YAML::Value << yes_no(c.output.picture);
   out << YAML::Key << "picture_size" << YAML::Value << std::to_string(c.output.picture_size);
+  if (!c.output.robot_frame.empty()) out << YAML::Key << "robot_frame" << YAML::Value << c.output.robot_frame;
+  out << YAML::Key << "grid" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "enabled" << YAML::Value << yes_no(c.output.grid.enabled);
+  out << YAML::Key << "resolution" << YAML::Value << format_number(c.output.grid.resolution);
+  out << YAML::Key << "max_range" << YAML::Value << format_number(c.output.grid.max_range);
+  out << YAML::EndMap;
   out << YAML::EndMap;
 
   if (!c.evaluation.relations.empty() || !c.evaluation.ground_truth_sensor.empty()) {
@@ -647,6 +662,24 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
 }
 
 }  // namespace
+
+std::vector<std::string> accepted_keys() {
+  std::vector<std::string> keys;
+  auto add = [&](const std::string& prefix, const std::vector<std::string>& names) {
+    for (const std::string& n : names) keys.push_back(prefix + n);
+  };
+  add("", kTopKeys);
+  add("run.", kRunKeys);
+  add("", {"source.plugin", "motion.plugin", "estimator.plugin", "features.<instance>.plugin"});
+  add("sensors.<sensor>.", kSensorKeys);
+  add("sensors.<sensor>.extractor.", {"plugin"});
+  add("association.", kAssociationKeys);
+  add("initial_pose.", kInitialPoseKeys);
+  add("output.", kOutputKeys);
+  add("output.grid.", kGridKeys);
+  add("evaluation.", kEvaluationKeys);
+  return keys;
+}
 
 const char* association_method_name(AssociationConfig::Method method) {
   return method == AssociationConfig::Method::Jcbb ? "jcbb" : "nearest_neighbour";

@@ -20,7 +20,9 @@
 //                  method: nearest_neighbour | jcbb, jcbb_max_nodes: 100000,
 //                  spatial_index: true, index_cell_size: 0 (m; 0 = the largest sensor max_range)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
-//   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000}
+//   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000,
+//                  robot_frame: <text for the pose files' headers>,
+//                  grid: {enabled: true, resolution: 0.05, max_range: 20}}
 //   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>}
 //
 // Plugin parameters are checked against the plugin's descriptor (loaded
@@ -111,6 +113,13 @@ struct AssociationConfig {
 };
 
 /// "nearest_neighbour" or "jcbb".
+/// Every key the loader accepts outside plugin parameters, dotted, with
+/// <instance> and <sensor> for the names a file chooses: "run.name",
+/// "sensors.<sensor>.max_range", "output.grid.resolution", "source.plugin", …
+/// (from the same lists the loader checks against; config/README.md must
+/// document each, tests/loading).
+std::vector<std::string> accepted_keys();
+
 const char* association_method_name(AssociationConfig::Method method);
 
 /// Extra references a run is scored against (in the summary).
@@ -124,10 +133,21 @@ struct EvaluationConfig {
   std::string ground_truth_sensor;
 };
 
+/// The occupancy grid written from the range scans (occupancy_grid.hpp).
+struct GridConfig {
+  bool enabled = true;
+  double resolution = 0.05;  ///< m per cell
+  double max_range = 20.0;   ///< m: longer beams clear cells up to here and mark nothing
+};
+
 struct OutputConfig {
   std::string dir;  ///< default "out/<run name>"
   bool trajectory = true, map = true, summary = true, picture = true;
   int picture_size = 1000;  ///< pixels
+  /// What the robot pose is, named in the header of every pose file (e.g.
+  /// "rear-axle centre"); empty: "robot base".
+  std::string robot_frame;
+  GridConfig grid;
 };
 
 struct RunConfig {

@@ -79,7 +79,9 @@ int cmd_run(const std::string& file, const std::string& out, long long max_steps
   options.stop_on_signals = true;
   const RunResult result = run_to_end(slam, options);
   std::cout << format_summary(result.summary, slam);
-  std::cout << "  outputs in " << result.output_dir.string() << "/ (trajectory.tum, map.yaml, summary.yaml, map.png)\n";
+  std::cout << "  outputs in " << result.output_dir.string() << "/ (";
+  for (std::size_t i = 0; i < result.files.size(); ++i) std::cout << (i > 0 ? ", " : "") << result.files[i];
+  std::cout << ")\n";
   return result.stop_signal != 0 ? 128 + result.stop_signal : 0;  // 130 for SIGINT, 143 for SIGTERM
 }
 
@@ -212,6 +214,9 @@ int main(int argc, char** argv) {
       setup_registry(registry, common);
       return run_check(check_cmd, registry, std::cout);
     }
+  } catch (const CheckUsageError& e) {
+    std::cerr << "mspace: usage error: " << e.what() << "\n";
+    return 2;
   } catch (const std::exception& e) {
     std::cerr << "mspace: error: " << e.what() << "\n";
     return 1;

@@ -39,9 +39,15 @@ void emit_matrix(YAML::Emitter& y, const Eigen::MatrixXd& m) {
 
 void write_pose_line(std::ostream& out, const StampedPose& p) {
   const Eigen::Vector4d q = quaternion_xyzw(p.pose);
-  out << std::fixed << std::setprecision(6) << p.t << ' ' << std::setprecision(6) << p.pose[kX] << ' '
+  out << std::fixed << std::setprecision(6) << p.t << ' ' << std::setprecision(9) << p.pose[kX] << ' '
       << p.pose[kY] << ' ' << p.pose[kZ] << ' ' << std::setprecision(9) << q[0] << ' ' << q[1] << ' ' << q[2]
       << ' ' << q[3] << '\n';
+}
+
+/// Each line of `text` as a '#' comment line.
+void write_header_lines(std::ostream& out, const std::string& text) {
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) out << "# " << line << '\n';
 }
 
 }  // namespace
@@ -64,13 +70,14 @@ struct TrajectoryStream::Impl {
   std::chrono::steady_clock::time_point last_flush = std::chrono::steady_clock::now();
 };
 
-TrajectoryStream::TrajectoryStream(const std::filesystem::path& dir, double flush_seconds)
+TrajectoryStream::TrajectoryStream(const std::filesystem::path& dir, double flush_seconds, const std::string& frame)
     : impl_(std::make_unique<Impl>()) {
   impl_->file = dir / "trajectory.partial.tum";
   impl_->flush_seconds = flush_seconds;
   impl_->out = open_for_writing(impl_->file);
   impl_->out << "# t x y z qx qy qz qw — robot poses as estimated at each step, streamed while the run goes; "
                 "a complete run replaces this file by trajectory.tum\n";
+  write_header_lines(impl_->out, frame);
   impl_->out.flush();
 }
 
@@ -124,9 +131,10 @@ RunSummary summarize(const Slam& slam, double wall_seconds) {
   return s;
 }
 
-void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
+void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses, const std::string& header) {
   std::ofstream out = open_for_writing(file);
   out << "# t x y z qx qy qz qw\n";
+  write_header_lines(out, header);
   for (const StampedPose& p : poses) write_pose_line(out, p);
   if (!out.flush()) throw std::runtime_error("cannot write '" + file.string() + "'");
 }
@@ -284,10 +292,18 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   if (s.errors) {
     const TrajectoryErrors& e = *s.errors;
     y << YAML::Key << "ground_truth" << YAML::Value << YAML::BeginMap;
+    // The files the figures are computed from (an evo-style APE of the two,
+    // SE(2) alignment, poses paired by time stamp, gives ate_rmse_m), and the
+    // ATE figures with 12 significant digits so that such a check can be exact.
+    const std::string& sensor = slam.config().evaluation.ground_truth_sensor;
+    y << YAML::Key << "estimate_file" << YAML::Value
+      << (sensor.empty() ? std::string("trajectory.tum") : "trajectory_" + sensor + ".tum");
+    y << YAML::Key << "reference_file" << YAML::Value << "ground_truth.tum";
+    y << YAML::Key << "alignment" << YAML::Value << "SE(2), least squares over the compared positions";
     y << YAML::Key << "poses_compared" << YAML::Value << e.matched;
-    y << YAML::Key << "ate_rmse_m" << YAML::Value << e.ate_rmse;
-    y << YAML::Key << "ate_median_m" << YAML::Value << e.ate_median;
-    y << YAML::Key << "ate_max_m" << YAML::Value << e.ate_max;
+    y << YAML::Key << "ate_rmse_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_rmse;
+    y << YAML::Key << "ate_median_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_median;
+    y << YAML::Key << "ate_max_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_max;
     y << YAML::Key << "final_translation_error_m" << YAML::Value << e.final_translation;
     if (e.final_heading) y << YAML::Key << "final_heading_error_deg" << YAML::Value << *e.final_heading * kRadToDeg;
     y << YAML::Key << "mean_robot_nees" << YAML::Value << s.mean_nees;

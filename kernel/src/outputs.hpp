@@ -51,7 +51,8 @@ void write_atomically(const std::filesystem::path& file,
 /// trajectory.tum and removes the partial file.
 class TrajectoryStream {
  public:
-  TrajectoryStream(const std::filesystem::path& dir, double flush_seconds);
+  /// `frame` is the header's description of the poses (pose_file_frame()).
+  TrajectoryStream(const std::filesystem::path& dir, double flush_seconds, const std::string& frame);
   ~TrajectoryStream();
   TrajectoryStream(const TrajectoryStream&) = delete;
   TrajectoryStream& operator=(const TrajectoryStream&) = delete;
@@ -67,8 +68,31 @@ class TrajectoryStream {
   std::size_t written_ = 0;
 };
 
-/// `t x y z qx qy qz qw` per line (TUM RGB-D benchmark format).
-void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses);
+/// `t x y z qx qy qz qw` per line (TUM RGB-D benchmark format), after '#'
+/// header lines: the columns, then `header` (one '#' line per line of it).
+/// Positions have 9 decimals (nm), so a third-party tool's ATE on the file
+/// agrees with the summary's to ~1e-9 m.
+void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses, const std::string& header);
+
+// ---- Pose files and their frames (pose_files.cpp) ---------------------------
+
+/// Which poses a pose file holds.
+enum class PoseFile {
+  Robot,           ///< trajectory.tum: the robot's estimated poses
+  EvaluatedSensor, ///< trajectory_<sensor>.tum: those of evaluation.ground_truth_sensor
+  Reference,       ///< ground_truth.tum: the source's reference poses
+};
+
+/// The header text of a pose file: which body frame its poses are of (the
+/// robot frame as output.robot_frame names it, or a sensor with its mount)
+/// and which frame they are in (the map frame, fixed by the first pose; or
+/// the reference's own frame), and how the summary compares them.
+std::string pose_file_frame(const Slam& slam, PoseFile which);
+
+/// trajectory.tum, ground_truth.tum (when the source gave one) and, when the
+/// evaluation compares a sensor's poses with it, trajectory_<sensor>.tum;
+/// each written atomically with its frame header. Returns the files written.
+std::vector<std::filesystem::path> write_pose_files(const std::filesystem::path& dir, const Slam& slam);
 /// Every feature: id, type instance, plugin, layout, coordinates, M-space
 /// dimension and its covariance block.
 void write_map_yaml(const std::filesystem::path& file, const Slam& slam);

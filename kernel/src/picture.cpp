@@ -5,7 +5,8 @@
 // as a dot, several point blocks as a polyline through them). When features
 // have 3-D points off the ground plane (ceiling lines, lamps) a side view
 // (x against height) is added under the top view, and single such points are
-// drawn as squares.
+// drawn as squares. The occupancy grid's picture (grid.png) draws the same
+// features over the grid.
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -16,6 +17,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "occupancy_grid.hpp"
 #include "outputs.hpp"
 #include "slam.hpp"
 
@@ -89,6 +91,65 @@ void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const E
   const cv::Size axes(std::max(1, static_cast<int>(k * std::sqrt(es.eigenvalues()[1]) * v.scale)),
                       std::max(1, static_cast<int>(k * std::sqrt(es.eigenvalues()[0]) * v.scale)));
   cv::ellipse(img, v.px(c.x(), c.y()), axes, angle, 0, 360, colour, 1, cv::LINE_AA);
+}
+
+/// The map's features over a top view: point blocks as dots (to scale when
+/// the feature has a footprint), several point blocks as a polyline, shaded
+/// by M-space dimension, with 3σ ellipses; shared coordinates as squares.
+void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
+  for (const MapFeature& f : slam.features()) {
+    const int dim = f.feature->mspace_dim();
+    const int max_dim = slam.feature_types()[f.type].type->max_mspace_dim();
+    const cv::Scalar colour = dim_colour(dim, max_dim);
+    const std::vector<Eigen::Vector2d> pts = point_blocks(*f.feature);
+    if (pts.size() >= 2) {
+      for (std::size_t i = 0; i + 1 < pts.size(); ++i)
+        cv::line(img, v.px(pts[i].x(), pts[i].y()), v.px(pts[i + 1].x(), pts[i + 1].y()), colour, 2, cv::LINE_AA);
+    } else if (pts.size() == 1) {
+      const std::optional<double> radius = f.feature->footprint_radius();
+      if (off_ground(*f.feature)) {
+        const cv::Point q = v.px(pts[0].x(), pts[0].y());
+        cv::rectangle(img, q - cv::Point(3, 3), q + cv::Point(3, 3), colour, cv::FILLED, cv::LINE_AA);
+      } else if (radius && *radius * v.scale >= 2.0)  // drawn to scale when it shows
+        cv::circle(img, v.px(pts[0].x(), pts[0].y()), static_cast<int>(std::lround(*radius * v.scale)), colour, 2,
+                   cv::LINE_AA);
+      else
+        cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
+    }
+    if (dim == 0) continue;
+    // Covariance of x_f implied by the M-space covariance: B̃ P B̃ᵀ (eq. 11).
+    const Eigen::MatrixXd Bd = f.feature->B_dual();
+    const Eigen::MatrixXd C = Bd * slam.feature_covariance(f) * Bd.transpose();
+    const CoordLayout& layout = f.feature->layout();
+    for (int b = 0, p = 0; b < layout.num_blocks(); ++b) {
+      if (layout.kind(b) == BlockKind::Scalar) continue;
+      const int o = layout.offset(b);
+      draw_ellipse(img, v, pts[p++], C.block<2, 2>(o, o), colour);
+    }
+  }
+
+  // Shared coordinates (e.g. a corner two features meet at) as squares.
+  for (const SharedCoordinate& c : slam.shared_coordinates()) {
+    const Eigen::VectorXd p = slam.shared_value(c);
+    if (p.size() < 2) continue;
+    const cv::Point q = v.px(p[0], p[1]);
+    cv::rectangle(img, q - cv::Point(4, 4), q + cv::Point(4, 4), {0, 0, 200}, 2, cv::LINE_AA);
+  }
+}
+
+/// Writes img (BGR) as a PNG.
+void encode_png(const std::filesystem::path& file, const cv::Mat& img) {
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
+  // Encoded with libpng's simplified API rather than OpenCV's imgcodecs, whose
+  // dependencies (GDAL, codecs, …) would add ~0.2 s of start-up to every run.
+  png_image png{};
+  png.version = PNG_IMAGE_VERSION;
+  png.width = static_cast<png_uint_32>(img.cols);
+  png.height = static_cast<png_uint_32>(img.rows);
+  png.format = PNG_FORMAT_BGR;
+  png.flags = PNG_IMAGE_FLAG_FAST;  // faster compression; a map picture is mostly flat colour
+  if (png_image_write_to_file(&png, file.string().c_str(), 0, img.data, static_cast<png_int_32>(img.step), nullptr) == 0)
+    throw std::runtime_error("cannot write picture '" + file.string() + "': " + png.message);
 }
 
 }  // namespace
@@ -167,36 +228,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     polyline(truth_poses, {60, 170, 60}, 2);
   polyline(slam.trajectory(), {200, 80, 30}, 1);
 
-  for (const MapFeature& f : slam.features()) {
-    const int dim = f.feature->mspace_dim();
-    const int max_dim = slam.feature_types()[f.type].type->max_mspace_dim();
-    const cv::Scalar colour = dim_colour(dim, max_dim);
-    const std::vector<Eigen::Vector2d> pts = point_blocks(*f.feature);
-    if (pts.size() >= 2) {
-      for (std::size_t i = 0; i + 1 < pts.size(); ++i)
-        cv::line(img, v.px(pts[i].x(), pts[i].y()), v.px(pts[i + 1].x(), pts[i + 1].y()), colour, 2, cv::LINE_AA);
-    } else if (pts.size() == 1) {
-      const std::optional<double> radius = f.feature->footprint_radius();
-      if (off_ground(*f.feature)) {
-        const cv::Point q = v.px(pts[0].x(), pts[0].y());
-        cv::rectangle(img, q - cv::Point(3, 3), q + cv::Point(3, 3), colour, cv::FILLED, cv::LINE_AA);
-      } else if (radius && *radius * v.scale >= 2.0)  // drawn to scale when it shows
-        cv::circle(img, v.px(pts[0].x(), pts[0].y()), static_cast<int>(std::lround(*radius * v.scale)), colour, 2,
-                   cv::LINE_AA);
-      else
-        cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
-    }
-    if (dim == 0) continue;
-    // Covariance of x_f implied by the M-space covariance: B̃ P B̃ᵀ (eq. 11).
-    const Eigen::MatrixXd Bd = f.feature->B_dual();
-    const Eigen::MatrixXd C = Bd * slam.feature_covariance(f) * Bd.transpose();
-    const CoordLayout& layout = f.feature->layout();
-    for (int b = 0, p = 0; b < layout.num_blocks(); ++b) {
-      if (layout.kind(b) == BlockKind::Scalar) continue;
-      const int o = layout.offset(b);
-      draw_ellipse(img, v, pts[p++], C.block<2, 2>(o, o), colour);
-    }
-  }
+  draw_features(img, v, slam);
 
   if (side) {
     // Side view: x against height, the ground (z = 0) and the path on it.
@@ -221,14 +253,6 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
                 cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
   }
 
-  // Shared coordinates (e.g. a corner two features meet at) as squares.
-  for (const SharedCoordinate& c : slam.shared_coordinates()) {
-    const Eigen::VectorXd p = slam.shared_value(c);
-    if (p.size() < 2) continue;
-    const cv::Point q = v.px(p[0], p[1]);
-    cv::rectangle(img, q - cv::Point(4, 4), q + cv::Point(4, 4), {0, 0, 200}, 2, cv::LINE_AA);
-  }
-
   // Scale bar and legend.
   const double bar = grid;
   const cv::Point bar0(v.margin, size_px - v.margin / 2);  // under the top view
@@ -248,17 +272,41 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
   cv::putText(img, slam.config().name, {size_px - 220, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
 
-  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
-  // Encoded with libpng's simplified API rather than OpenCV's imgcodecs, whose
-  // dependencies (GDAL, codecs, …) would add ~0.2 s of start-up to every run.
-  png_image png{};
-  png.version = PNG_IMAGE_VERSION;
-  png.width = static_cast<png_uint_32>(img.cols);
-  png.height = static_cast<png_uint_32>(img.rows);
-  png.format = PNG_FORMAT_BGR;
-  png.flags = PNG_IMAGE_FLAG_FAST;  // faster compression; a map picture is mostly flat colour
-  if (png_image_write_to_file(&png, file.string().c_str(), 0, img.data, static_cast<png_int_32>(img.step), nullptr) == 0)
-    throw std::runtime_error("cannot write picture '" + file.string() + "': " + png.message);
+  encode_png(file, img);
+}
+
+void write_grid_picture(const std::filesystem::path& file, const Slam& slam, const OccupancyGrid& grid, int size_px) {
+  // The grid's extent, its longer side size_px pixels wide. View::px counts
+  // rows from v.size, the image's height.
+  View v;
+  v.margin = 10;
+  const int cells = std::max(grid.width, grid.height);
+  const int inner = std::max(size_px, 64) - 2 * v.margin;
+  v.scale = inner / (cells * grid.resolution);
+  v.min_x = grid.origin.x();
+  v.min_y = grid.origin.y();
+  const int cols = static_cast<int>(std::lround(grid.width * grid.resolution * v.scale)) + 2 * v.margin;
+  v.size = static_cast<int>(std::lround(grid.height * grid.resolution * v.scale)) + 2 * v.margin + 20;  // + title
+  cv::Mat img(v.size, cols, CV_8UC3, cv::Scalar(255, 255, 255));
+  // Each pixel shows the cell under its centre: occupied black, free white,
+  // unknown grey (as map_server reads grid.pgm).
+  for (int row = 0; row < img.rows; ++row)
+    for (int col = 0; col < img.cols; ++col) {
+      const Eigen::Vector2d p(v.min_x + (col - v.margin + 0.5) / v.scale, v.min_y + (v.size - v.margin - row - 0.5) / v.scale);
+      const Eigen::Vector2i c = grid.cell_of(p);
+      if (!grid.contains(c.x(), c.y())) continue;
+      const OccupancyGrid::Cell cell = grid.cell(c.x(), c.y());
+      const unsigned char g = cell == OccupancyGrid::Cell::Occupied ? 0 : cell == OccupancyGrid::Cell::Free ? 255 : 205;
+      img.at<cv::Vec3b>(row, col) = {g, g, g};
+    }
+  std::vector<cv::Point> path;
+  for (const StampedPose& p : slam.trajectory()) path.push_back(v.px(p.pose[kX], p.pose[kY]));
+  if (path.size() > 1) cv::polylines(img, path, false, {200, 80, 30}, 1, cv::LINE_AA);
+  draw_features(img, v, slam);
+  cv::putText(img, slam.config().name + ": occupancy grid (" + std::to_string(grid.width) + " x " +
+                       std::to_string(grid.height) + " cells), features, path",
+              {10, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 200}, 1, cv::LINE_AA);
+  encode_png(file, img);
 }
 
 }  // namespace mspace::kernel

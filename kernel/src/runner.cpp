@@ -8,6 +8,7 @@
 #include <string>
 
 #include "logging.hpp"
+#include "occupancy_grid.hpp"
 #include "persistence.hpp"
 #include "progress.hpp"
 #include "slam.hpp"
@@ -21,24 +22,52 @@ std::string status_line(const Slam& slam) {
   return std::to_string(in_map) + " features, " + std::to_string(tentative) + " tentative";
 }
 
-void write_outputs(const Slam& slam, const RunSummary& summary, const std::filesystem::path& dir) {
+/// Writes the outputs the configuration asks for; returns the names written.
+std::vector<std::string> write_outputs(const Slam& slam, const RunSummary& summary, const std::filesystem::path& dir,
+                                       const ScanCollector* scans) {
   const OutputConfig& out = slam.config().output;
   std::filesystem::create_directories(dir);
   namespace fs = std::filesystem;
-  if (out.trajectory) {
-    write_atomically(dir / "trajectory.tum", [&](const fs::path& f) { write_tum(f, slam.trajectory()); });
-    if (!slam.ground_truth().empty())
-      write_atomically(dir / "ground_truth.tum", [&](const fs::path& f) { write_tum(f, slam.ground_truth()); });
-  }
+  std::vector<std::string> written;
+  if (out.trajectory)  // with their frames (pose_files.cpp)
+    for (const fs::path& f : write_pose_files(dir, slam)) written.push_back(f.filename().string());
   if (out.map) {
     write_atomically(dir / "map.yaml", [&](const fs::path& f) { write_map_yaml(f, slam); });
     write_map_bin(dir / "map.bin", slam);  // the exact store, through the plugins' save(); atomic itself
+    written.insert(written.end(), {"map.yaml", "map.bin"});
   }
-  if (out.summary)
+  if (out.summary) {
     write_atomically(dir / "summary.yaml", [&](const fs::path& f) { write_summary_yaml(f, summary, slam); });
-  if (out.picture)
+    written.emplace_back("summary.yaml");
+  }
+  if (out.picture) {
     write_atomically(dir / "map.png", [&](const fs::path& f) { write_picture(f, slam, out.picture_size); });
+    written.emplace_back("map.png");
+  }
+  if (scans != nullptr)  // grid.pgm/.yaml/.png from the final trajectory
+    for (const fs::path& f : write_grid_outputs(dir, slam, *scans)) written.push_back(f.filename().string());
+  return written;
 }
+
+/// Keeps the run's range scans for the occupancy grid while it is alive.
+class ScanRecording {
+ public:
+  ScanRecording(Slam& slam, bool on) : slam_(slam) {
+    if (!on) return;
+    scans_ = std::make_unique<ScanCollector>(slam.config());
+    slam.set_step_observer([this](const DataStep& data, std::size_t pose) { scans_->add(data, pose); });
+  }
+  ~ScanRecording() {
+    if (scans_) slam_.set_step_observer(nullptr);
+  }
+  ScanRecording(const ScanRecording&) = delete;
+  ScanRecording& operator=(const ScanRecording&) = delete;
+  const ScanCollector* scans() const { return scans_.get(); }
+
+ private:
+  Slam& slam_;
+  std::unique_ptr<ScanCollector> scans_;
+};
 
 // ---- Interruption ------------------------------------------------------------
 //
@@ -98,7 +127,8 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
   if (options.stop_on_signals) signals = std::make_unique<StopSignals>();
   std::unique_ptr<TrajectoryStream> stream;
   if (options.write_outputs && slam.config().output.trajectory)
-    stream = std::make_unique<TrajectoryStream>(result.output_dir, 2.0);
+    stream = std::make_unique<TrajectoryStream>(result.output_dir, 2.0, pose_file_frame(slam, PoseFile::Robot));
+  const ScanRecording recording(slam, options.write_outputs && slam.config().output.grid.enabled);
   std::size_t done = 0;
   try {
     while (slam.step()) {
@@ -115,7 +145,7 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
     progress.finish(done, status_line(slam));
     if (options.write_outputs && done > 0) {
       result.summary = summarize(slam, elapsed());
-      write_outputs(slam, result.summary, result.output_dir);
+      result.files = write_outputs(slam, result.summary, result.output_dir, recording.scans());
       if (stream) stream->discard();
       kernel_log().error("run stopped after ", done, " steps; the outputs of those steps were written to ",
                          result.output_dir.string());
@@ -133,7 +163,7 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
                       signal_name(result.stop_signal), " again ends at once)");
   }
   if (options.write_outputs) {
-    write_outputs(slam, result.summary, result.output_dir);
+    result.files = write_outputs(slam, result.summary, result.output_dir, recording.scans());
     if (stream) stream->discard();
   }
   return result;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "outputs.hpp"
 
@@ -27,6 +28,7 @@ struct RunResult {
   RunSummary summary;
   std::filesystem::path output_dir;
   int stop_signal = 0;  ///< the signal that interrupted the run, 0 if none
+  std::vector<std::string> files;  ///< the output files written (names in output_dir)
 };
 
 /// Runs `slam` to the end of its data. Outputs: the trajectory is streamed to

@@ -237,6 +237,7 @@ bool Slam::step() {
   relinearize(false);
 
   record(data);
+  if (step_observer_) step_observer_(data, trajectory_.size() - 1);
   return true;
 }
 

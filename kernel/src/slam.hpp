@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -168,6 +169,12 @@ class Slam {
   const Problem* problem() const { return problem_.get(); }
   Problem* problem() { return problem_.get(); }
 
+  /// Called after every step with the step's data and the index of its pose
+  /// in trajectory() (the runner keeps the range scans for the occupancy
+  /// grid this way); an empty function removes it.
+  using StepObserver = std::function<void(const DataStep& data, std::size_t pose_index)>;
+  void set_step_observer(StepObserver observer) { step_observer_ = std::move(observer); }
+
  private:
   struct Match;
   struct ReadingWork;
@@ -235,6 +242,7 @@ class Slam {
   /// seen only what it mapped itself on the way, so its drift against the
   /// old map grew.
   double last_anchor_path_ = 0.0;
+  StepObserver step_observer_;
 };
 
 }  // namespace mspace::kernel

@@ -15,6 +15,7 @@
 #include <iostream>
 
 #include "building_log.hpp"
+#include "ring_building.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "plugin_registry.hpp"
@@ -30,13 +31,8 @@ namespace fs = std::filesystem;
 
 TEST(SimBuildingRun, WallsOnWheelOdometryAreNotWorseThanTheOdometry) {
   set_log_level(LogLevel::Warn);
-  sim_building::GeneratorSettings settings;
-  settings.plan = "ring";
-  settings.route.length_m = 0.0;
-  const sim_building::Simulation sim = sim_building::simulate(settings);
   const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / "ring_1";
-  sim_building::write_data_set(sim, dir);
-  setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
+  const sim_building::Simulation sim = test::write_ring_building(dir);
 
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
@@ -83,14 +79,9 @@ TEST(SimBuildingRun, WallsOnWheelOdometryAreNotWorseThanTheOdometry) {
 // 0.039 m / 0.15° (48). The bounds are the wheel-odometry run's level.
 TEST(SimBuildingRun, WallsOnLaserOdometryWithPeopleCloseTheLoops) {
   set_log_level(LogLevel::Warn);
-  sim_building::GeneratorSettings settings;
-  settings.plan = "ring";
-  settings.route.length_m = 0.0;
-  const sim_building::Simulation sim = sim_building::simulate(settings);
-  ASSERT_GE(sim.plan.people.size(), 2u);
   const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / "ring_1_laser";
-  sim_building::write_data_set(sim, dir);
-  setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
+  const sim_building::Simulation sim = test::write_ring_building(dir);
+  ASSERT_GE(sim.plan.people.size(), 2u);
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
   const RunConfig config = load_config(fs::path(MSPACE_SOURCE_DIR) / "config" / "sim_building.yaml", registry);
