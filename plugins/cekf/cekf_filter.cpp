@@ -45,8 +45,11 @@ void compact_lower(Eigen::MatrixXd& m, const std::vector<int>& keep) {
 
 }  // namespace
 
-CekfFilter::CekfFilter(int max_active, int keep_steps, bool observability_constrained)
-    : max_active_(max_active), keep_steps_(keep_steps), constrained_(observability_constrained) {
+CekfFilter::CekfFilter(int max_active, int keep_steps, bool observability_constrained, bool churn_fallback)
+    : max_active_(max_active),
+      keep_steps_(keep_steps),
+      constrained_(observability_constrained),
+      churn_fallback_(churn_fallback) {
   if (max_active < 1) {
     throw std::invalid_argument("cekf: max_active must be at least 1, got " + std::to_string(max_active));
   }
@@ -64,6 +67,12 @@ void CekfFilter::reset(const Eigen::MatrixXd& P_rr) {
   std::iota(slot_.begin(), slot_.end(), 0);
   active_ = slot_;
   touched_.assign(static_cast<std::size_t>(k_), 0);
+  seen_in_.assign(static_cast<std::size_t>(k_), 0);
+  all_active_ = false;
+  interval_ = 0;
+  interval_rows_ = 0;
+  virtual_basis_ = virtual_active_ = 0;
+  fallbacks_ = 0;
   slot_live_.assign(static_cast<std::size_t>(k_), 1);
   dead_slots_ = 0;
   updates_ = 0;
@@ -156,6 +165,7 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
   refresh_memo(V);
 
   ++updates_;
+  interval_rows_ += s.eta.size();
   touch(s.union_idx);
   flush_if_needed();
   return dx;
@@ -186,8 +196,10 @@ int CekfFilter::augment(const StateAugmentation& aug) {
     slot_.push_back(ns_ + r);
     active_.push_back(na_ + r);
     touched_.push_back(updates_);
+    seen_in_.push_back(interval_);  // active from birth: never in the basis
     slot_live_.push_back(1);
   }
+  if (all_active_) virtual_active_ += added;
   n_ += added;
   na_ += added;
   ns_ += added;
@@ -282,22 +294,35 @@ void CekfFilter::remove(std::vector<int> idx) {
     slot_[w] = slot_[i];
     active_[w] = active_[i] >= 0 ? new_position[static_cast<std::size_t>(active_[i])] : -1;
     touched_[w] = touched_[i];
+    seen_in_[w] = seen_in_[i];
     ++w;
   }
   slot_.resize(w);
   active_.resize(w);
   touched_.resize(w);
+  seen_in_.resize(w);
   n_ = static_cast<int>(w);
   if (constrained_) U_.keep_rows(kept_rows);
 }
 
-// The global update: (I) written out, then a new partition with Φ = I, Ψ = 0.
-void CekfFilter::flush() {
+void CekfFilter::flush() { global_update(false); }
+
+// The global update: (I) written out, then a new partition with Φ = I, Ψ = 0:
+// A = the robot and the recent rows, or (all_rows) every row.
+void CekfFilter::global_update(bool all_rows) {
   memo_.clear();  // Ψ becomes 0
   if (n0_ > 0) refresh_passive_block();
   write_active_rows_into_store();
   if (dead_slots_ > 0) drop_dead_slots();
-  repartition(choose_active());
+  if (all_rows) {
+    std::vector<int> all(static_cast<std::size_t>(n_));
+    std::iota(all.begin(), all.end(), 0);
+    repartition(all);
+  } else {
+    repartition(choose_active());
+  }
+  all_active_ = all_rows;
+  start_interval();
   ++global_updates_;
 }
 
@@ -383,11 +408,66 @@ void CekfFilter::refresh_memo(const Eigen::MatrixXd& V) {
 }
 
 void CekfFilter::touch(const std::vector<int>& rows) {
-  for (int i : rows) touched_[static_cast<std::size_t>(i)] = updates_;
+  for (int i : rows) {
+    const auto u = static_cast<std::size_t>(i);
+    touched_[u] = updates_;
+    if (seen_in_[u] == interval_) continue;
+    seen_in_[u] = interval_;  // first touch in this interval: activated in the compressed form
+    if (all_active_) {
+      ++virtual_basis_;
+      ++virtual_active_;
+    }
+  }
 }
 
+// ---------------------------------------------------------------- churn
+
+// Costs in multiply–adds, leading terms only. A global update after an
+// interval with basis n0 and active part n_A: P⁰_BB − Gᵀ Ψ G over the lower
+// triangle (ns² n0 / 2) with Ψ Gᵀ (ns n0²), and P_AB = Φ G (n_A n0 ns).
+// The plain EKF pays ns² m / 2 for each update of m rows (eq. 32 on the whole
+// covariance), so ns² r / 2 for the interval's r rows.
+double CekfFilter::global_update_cost(int basis, int active) const {
+  const auto ns = static_cast<double>(ns_), n0 = static_cast<double>(basis);
+  return ns * ns * n0 / 2.0 + ns * n0 * (n0 + static_cast<double>(active));
+}
+
+double CekfFilter::ekf_interval_cost() const {
+  const auto ns = static_cast<double>(ns_);
+  return ns * ns * static_cast<double>(interval_rows_) / 2.0;
+}
+
+void CekfFilter::start_interval() {
+  ++interval_;
+  interval_rows_ = 0;
+  if (!all_active_) return;
+  // The partition a global update would choose now (robot and recent rows) is
+  // the virtual interval's starting basis.
+  const std::vector<int> kept = choose_active();
+  for (int i : kept) seen_in_[static_cast<std::size_t>(i)] = interval_;
+  virtual_basis_ = virtual_active_ = static_cast<int>(kept.size());
+}
+
+// Compressed: a global update when the basis or A outgrow max_active; if it
+// costs more than the EKF's updates of the interval did, the next partition
+// is A = everything (updates are the EKF's, no global updates). All active:
+// after every call, the global update of a virtual compressed filter (its
+// basis and A counted by touch() and augment()) is compared with the EKF's
+// updates since its interval began; below kReturnShare of them, the filter
+// compresses again. The virtual interval ends as a real one would.
 void CekfFilter::flush_if_needed() {
-  if (n0_ > max_active_ || na_ > max_active_) flush();
+  if (!all_active_) {
+    if (n0_ <= max_active_ && na_ <= max_active_) return;
+    const bool churn = churn_fallback_ && global_update_cost(n0_, na_) > ekf_interval_cost();
+    if (churn) ++fallbacks_;
+    global_update(churn);
+    return;
+  }
+  if (global_update_cost(virtual_basis_, virtual_active_) < kReturnShare * ekf_interval_cost()) {
+    global_update(false);
+  } else if (virtual_basis_ > max_active_ || virtual_active_ > max_active_) {
+    start_interval();
+  }
 }
 
 // ---------------------------------------------------------------- global update
@@ -402,17 +482,20 @@ void CekfFilter::refresh_passive_block() {
 }
 
 // The rows of A into the store: P_AB = Φ G against every slot, then P_AA.
+// (No basis: every row is active, P_AA is all of it.)
 void CekfFilter::write_active_rows_into_store() {
   std::vector<int> slot_of(static_cast<std::size_t>(na_));
   for (int i = 0; i < n_; ++i) {
     const auto u = static_cast<std::size_t>(i);
     if (active_[u] >= 0) slot_of[static_cast<std::size_t>(active_[u])] = slot_[u];
   }
-  const Eigen::MatrixXd pab = phi_.topLeftCorner(na_, n0_) * gt_.topLeftCorner(ns_, n0_).transpose();
-  for (int a = 0; a < na_; ++a) {
-    const int s = slot_of[static_cast<std::size_t>(a)];
-    p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
-    p0_.row(s).head(s) = pab.row(a).head(s);
+  if (n0_ > 0) {
+    const Eigen::MatrixXd pab = phi_.topLeftCorner(na_, n0_) * gt_.topLeftCorner(ns_, n0_).transpose();
+    for (int a = 0; a < na_; ++a) {
+      const int s = slot_of[static_cast<std::size_t>(a)];
+      p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
+      p0_.row(s).head(s) = pab.row(a).head(s);
+    }
   }
   for (int b = 0; b < na_; ++b) {
     for (int a = b; a < na_; ++a) {
@@ -460,12 +543,14 @@ std::vector<int> CekfFilter::choose_active() const {
 
 // With the store holding the full covariance P⁰: A = active_rows, B = the
 // rest, P_AA = P⁰_AA, G = P⁰_{A,B} (so a0 = A), Φ = I, Ψ = 0, and (I) holds.
+// With every row in A there is no B and no basis (n0 = 0).
 void CekfFilter::repartition(const std::vector<int>& active_rows) {
   const auto na = static_cast<int>(active_rows.size());
+  const int n0 = na < n_ ? na : 0;
   na_ = 0;  // nothing of the old Φ, Ψ, G, P_AA is kept
   n0_ = 0;
   reserve_active(na);
-  reserve_basis(na);
+  reserve_basis(n0);
   std::fill(active_.begin(), active_.end(), -1);
   std::vector<int> slots;
   for (int c = 0; c < na; ++c) {
@@ -476,11 +561,12 @@ void CekfFilter::repartition(const std::vector<int>& active_rows) {
   for (int b = 0; b < na; ++b) {
     for (int a = b; a < na; ++a)
       paa_(a, b) = p0(slots[static_cast<std::size_t>(a)], slots[static_cast<std::size_t>(b)]);
-    p0_column(slots[static_cast<std::size_t>(b)], gt_.col(b).head(ns_));
+    if (n0 > 0) p0_column(slots[static_cast<std::size_t>(b)], gt_.col(b).head(ns_));
   }
-  phi_.topLeftCorner(na, na).setIdentity();
-  psi_.topLeftCorner(na, na).setZero();
-  na_ = n0_ = na;
+  phi_.topLeftCorner(na, n0).setIdentity();
+  psi_.topLeftCorner(n0, n0).setZero();
+  na_ = na;
+  n0_ = n0;
 }
 
 // ---------------------------------------------------------------- storage
