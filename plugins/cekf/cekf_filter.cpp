@@ -73,6 +73,7 @@ void CekfFilter::reset(const Eigen::MatrixXd& P_rr) {
   interval_rows_ = 0;
   virtual_basis_ = virtual_active_ = 0;
   fallbacks_ = 0;
+  churn_ratio_ = -1.0;
   slot_live_.assign(static_cast<std::size_t>(k_), 1);
   dead_slots_ = 0;
   updates_ = 0;
@@ -310,6 +311,7 @@ void CekfFilter::flush() { global_update(false); }
 // The global update: (I) written out, then a new partition with Φ = I, Ψ = 0:
 // A = the robot and the recent rows, or (all_rows) every row.
 void CekfFilter::global_update(bool all_rows) {
+  reserve_store();
   memo_.clear();  // Ψ becomes 0
   if (n0_ > 0) refresh_passive_block();
   write_active_rows_into_store();
@@ -351,6 +353,7 @@ void CekfFilter::activate(const std::vector<int>& rows) {
   std::sort(passive.begin(), passive.end());
   passive.erase(std::unique(passive.begin(), passive.end()), passive.end());
   if (passive.empty()) return;
+  reserve_store();
   const auto t = static_cast<int>(passive.size());
   std::vector<int> slots;
   for (int i : passive) slots.push_back(slot_[static_cast<std::size_t>(i)]);
@@ -448,22 +451,36 @@ void CekfFilter::start_interval() {
   virtual_basis_ = virtual_active_ = static_cast<int>(kept.size());
 }
 
-// Compressed: a global update when the basis or A outgrow max_active; if it
-// costs more than the EKF's updates of the interval did, the next partition
-// is A = everything (updates are the EKF's, no global updates). All active:
-// after every call, the global update of a virtual compressed filter (its
-// basis and A counted by touch() and augment()) is compared with the EKF's
-// updates since its interval began; below kReturnShare of them, the filter
-// compresses again. The virtual interval ends as a real one would.
+// Global update cost over the EKF's cost of the interval's updates, capped at
+// kMaxCostRatio (an interval of augmentations only costs the EKF almost nothing).
+double CekfFilter::cost_ratio(int basis, int active) const {
+  const double global = global_update_cost(basis, active), ekf = ekf_interval_cost();
+  if (global <= 0.0) return 0.0;
+  return global >= kMaxCostRatio * ekf ? kMaxCostRatio : global / ekf;
+}
+
+// Compressed: a global update when the basis or A outgrow max_active. The
+// ratio of its cost to the EKF's updates of the interval is averaged over
+// intervals (r̄ ← (r̄ + r) / 2, so one unlucky interval does not decide); when
+// r̄ > 1 the next partition is A = everything (updates are the EKF's, no global
+// updates). All active: after every call, the global update of a virtual
+// compressed filter (its basis and A counted by touch() and augment()) is
+// compared with the EKF's updates since its interval began; below kReturnShare
+// of them, the filter compresses again. The virtual interval ends as a real
+// one would.
 void CekfFilter::flush_if_needed() {
   if (!all_active_) {
     if (n0_ <= max_active_ && na_ <= max_active_) return;
-    const bool churn = churn_fallback_ && global_update_cost(n0_, na_) > ekf_interval_cost();
+    const double ratio = cost_ratio(n0_, na_);
+    churn_ratio_ = churn_ratio_ < 0.0 ? ratio : 0.5 * (churn_ratio_ + ratio);
+    const bool churn = churn_fallback_ && churn_ratio_ > 1.0;
     if (churn) ++fallbacks_;
     global_update(churn);
     return;
   }
-  if (global_update_cost(virtual_basis_, virtual_active_) < kReturnShare * ekf_interval_cost()) {
+  const double ratio = cost_ratio(virtual_basis_, virtual_active_);
+  if (ratio < kReturnShare) {
+    churn_ratio_ = ratio;
     global_update(false);
   } else if (virtual_basis_ > max_active_ || virtual_active_ > max_active_) {
     start_interval();
@@ -644,9 +661,15 @@ void CekfFilter::reserve_basis(int cols) {
   grow(gt_, gt_.rows(), cols, ns_, n0_);
 }
 
-void CekfFilter::reserve_slots(int slots) {
-  grow(p0_, slots, slots, ns_, ns_);
-  grow(gt_, slots, gt_.cols(), ns_, n0_);
+void CekfFilter::reserve_slots(int slots) { grow(gt_, slots, gt_.cols(), ns_, n0_); }
+
+// The P⁰ store grows only when it is read or written (activation, global
+// update), not with every augmentation: with every row active (churn) it is
+// not touched until the next global update. Slots beyond its old size belong
+// to rows created since, all active: their entries are stale anyway.
+void CekfFilter::reserve_store() {
+  const Index used = std::min<Index>(ns_, p0_.rows());
+  grow(p0_, ns_, ns_, used, used);
 }
 
 }  // namespace mspace::cekf

@@ -34,8 +34,8 @@
 // every update brings new rows, the basis fills after a few updates and the
 // global updates cost more than the EKF's updates of the same interval would
 // have. With `churn_fallback` (the default) the filter compares the two at
-// every global update (leading terms, see global_update_cost()) and, when the
-// compressed form lost, makes every row active: A = all, no basis, and each
+// every global update (leading terms, see global_update_cost(); averaged
+// over intervals) and, when the compressed form lost, makes every row active: A = all, no basis, and each
 // update is the EKF's own (eqs. 28–32 on the whole covariance). Meanwhile it
 // counts the basis and A that a compressed partition would have had (the
 // rows touched since a virtual global update); as soon as that virtual
@@ -85,7 +85,9 @@ class CekfFilter final : public Estimator {
   static constexpr int kDefaultKeepSteps = 8;
   /// Back to the compressed form when a virtual global update would have cost
   /// less than this share of the EKF's updates (below 1: hysteresis).
-  static constexpr double kReturnShare = 0.5;
+  static constexpr double kReturnShare = 0.8;
+  /// Cost ratios (global update / EKF updates) are capped at this.
+  static constexpr double kMaxCostRatio = 4.0;
 
   /// `max_active` (≥ 1): active rows or basis rows that trigger a global update.
   /// `keep_steps` (≥ 0): a row touched within this many updates stays active
@@ -173,6 +175,8 @@ class CekfFilter final : public Estimator {
   double global_update_cost(int basis, int active) const;
   /// Multiply–adds the plain EKF spent on this interval's updates.
   double ekf_interval_cost() const;
+  /// global_update_cost(basis, active) / ekf_interval_cost(), in [0, kMaxCostRatio].
+  double cost_ratio(int basis, int active) const;
   /// A new (real or, all active, virtual) interval between global updates.
   void start_interval();
   void refresh_passive_block();
@@ -185,6 +189,7 @@ class CekfFilter final : public Estimator {
   void reserve_active(int rows);
   void reserve_basis(int cols);
   void reserve_slots(int slots);
+  void reserve_store();
 
   int max_active_;
   int keep_steps_;
@@ -211,6 +216,7 @@ class CekfFilter final : public Estimator {
   int virtual_basis_ = 0;           ///< all active: the basis a compressed partition would have
   int virtual_active_ = 0;          ///< all active: the A it would have
   std::int64_t fallbacks_ = 0;
+  double churn_ratio_ = -1.0;       ///< running mean of cost_ratio() at global updates (< 0: none yet)
 
   std::vector<char> slot_live_;  ///< per slot: still owned by a state row
   int dead_slots_ = 0;
