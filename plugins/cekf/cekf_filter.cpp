@@ -235,31 +235,40 @@ Eigen::MatrixXd CekfFilter::active_block(const std::vector<int>& rows, const std
 // row a and G_j of a passive row j, P_aj = Φ_a G_j and P_ij = P⁰_ij − G_iᵀ Ψ G_j.
 Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std::vector<int>& cols,
                                         bool symmetric) const {
+  // The kernel's gating calls this (symmetric, the robot and one passive
+  // feature) for every feature in range at every reading: the symmetric case
+  // copies nothing twice.
   Eigen::MatrixXd out(static_cast<Index>(rows.size()), static_cast<Index>(cols.size()));
-  const Split r = split(rows), c = split(cols);
+  const Split r = split(rows);
+  const Split c = symmetric ? Split() : split(cols);
+  const Split& cs = symmetric ? r : c;
   const auto basis = Eigen::seqN(0, n0_);
   const Eigen::MatrixXd g_rows = gt_(r.passive_slot, basis).transpose();  // G_i, n0 × |rows in B|
-  const Eigen::MatrixXd g_cols = symmetric ? g_rows : Eigen::MatrixXd(gt_(c.passive_slot, basis).transpose());
+  const Eigen::MatrixXd g_other =
+      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(gt_(c.passive_slot, basis).transpose());
+  const Eigen::MatrixXd& g_cols = symmetric ? g_rows : g_other;
   // A handful of rows and columns: coefficient-wise products of copied rows
   // beat blocked products.
   const Eigen::MatrixXd phi_rows = phi_(r.active_pos, basis);
   const Eigen::MatrixXd ab = phi_rows.lazyProduct(g_cols);
-  const Eigen::MatrixXd ba =
-      symmetric ? ab : Eigen::MatrixXd(Eigen::MatrixXd(phi_(c.active_pos, basis)).lazyProduct(g_rows));
-  const Eigen::MatrixXd bb =
-      symmetric ? passive_quadratic(r.passive_slot, g_rows) : Eigen::MatrixXd(g_rows.transpose() * psi_times(g_cols));
+  const Eigen::MatrixXd ba_other =
+      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(Eigen::MatrixXd(phi_(c.active_pos, basis)).lazyProduct(g_rows));
+  const Eigen::MatrixXd& ba = symmetric ? ab : ba_other;
+  const Eigen::MatrixXd bb_other =
+      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(g_rows.transpose() * psi_times(g_cols));
+  const Eigen::MatrixXd& bb = symmetric ? passive_quadratic(r.passive_slot, g_rows) : bb_other;
   for (std::size_t i = 0; i < r.active_at.size(); ++i) {
-    for (std::size_t j = 0; j < c.active_at.size(); ++j)
-      out(r.active_at[i], c.active_at[j]) = paa(r.active_pos[i], c.active_pos[j]);
-    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
-      out(r.active_at[i], c.passive_at[j]) = ab(static_cast<Index>(i), static_cast<Index>(j));
+    for (std::size_t j = 0; j < cs.active_at.size(); ++j)
+      out(r.active_at[i], cs.active_at[j]) = paa(r.active_pos[i], cs.active_pos[j]);
+    for (std::size_t j = 0; j < cs.passive_at.size(); ++j)
+      out(r.active_at[i], cs.passive_at[j]) = ab(static_cast<Index>(i), static_cast<Index>(j));
   }
   for (std::size_t i = 0; i < r.passive_at.size(); ++i) {
-    for (std::size_t j = 0; j < c.active_at.size(); ++j)
-      out(r.passive_at[i], c.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
-    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
-      out(r.passive_at[i], c.passive_at[j]) =
-          p0(r.passive_slot[i], c.passive_slot[j]) - bb(static_cast<Index>(i), static_cast<Index>(j));
+    for (std::size_t j = 0; j < cs.active_at.size(); ++j)
+      out(r.passive_at[i], cs.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
+    for (std::size_t j = 0; j < cs.passive_at.size(); ++j)
+      out(r.passive_at[i], cs.passive_at[j]) =
+          p0(r.passive_slot[i], cs.passive_slot[j]) - bb(static_cast<Index>(i), static_cast<Index>(j));
   }
   return out;
 }
@@ -384,7 +393,7 @@ void CekfFilter::activate(const std::vector<int>& rows) {
 
 // ---------------------------------------------------------------- memo
 
-Eigen::MatrixXd CekfFilter::passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const {
+const Eigen::MatrixXd& CekfFilter::passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const {
   auto [entry, added] = memo_.try_emplace(slots);
   if (added) entry->second.quadratic = g.transpose() * psi_times(g);
   entry->second.asked = true;

@@ -151,7 +151,7 @@ class CekfFilter final : public Estimator {
   };
   Split split(const std::vector<int>& idx) const;
   /// G_Jᵀ Ψ G_J for the passive slots J with g = G_{:,J}, from the memo if there.
-  Eigen::MatrixXd passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const;
+  const Eigen::MatrixXd& passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const;
   /// Brings the memo up to date with Ψ ← Ψ + V Vᵀ and drops the blocks not asked about.
   void refresh_memo(const Eigen::MatrixXd& V);
   /// Ψ g (n0 × g.cols()).
