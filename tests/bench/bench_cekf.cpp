@@ -27,7 +27,8 @@
 //   ./build/bin/bench_cekf --benchmark_filter=RangeBearing --benchmark_counters_tabular=true
 //
 // Counters: state_dim; for the cekf, global_per_kstep (global updates per
-// 1000 steps), active_dim and basis_dim at the end.
+// 1000 steps), active_dim and basis_dim at the end, fallbacks (to every row
+// active, see cekf_filter.hpp; none expected here).
 //
 //   ./build/bin/bench_cekf --benchmark_counters_tabular=true
 #include <benchmark/benchmark.h>
@@ -163,6 +164,7 @@ void BM_CekfLocalStep(benchmark::State& state) {
       1000.0 * static_cast<double>(cekf.global_updates() - before) / static_cast<double>(steps);
   state.counters["active_dim"] = cekf.active_dim();
   state.counters["basis_dim"] = cekf.basis_dim();
+  state.counters["fallbacks"] = static_cast<double>(cekf.fallbacks());
 }
 
 BENCHMARK(BM_EkfLocalStep)
