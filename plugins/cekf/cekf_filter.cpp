@@ -472,11 +472,12 @@ double CekfFilter::cost_ratio(int basis, int active) const {
 // ratio of its cost to the EKF's updates of the interval is averaged over
 // intervals (r̄ ← (r̄ + r) / 2, so one unlucky interval does not decide); when
 // r̄ > 1 the next partition is A = everything (updates are the EKF's, no global
-// updates). All active: after every call, the global update of a virtual
-// compressed filter (its basis and A counted by touch() and augment()) is
-// compared with the EKF's updates since its interval began; below kReturnShare
-// of them, the filter compresses again. The virtual interval ends as a real
-// one would.
+// updates). All active: after every call, the ratio r of the global update of
+// a virtual compressed filter (its basis and A counted by touch() and
+// augment()) to the EKF's updates since its interval began enters the same
+// mean; when (r̄ + r) / 2 < kReturnShare the filter compresses again (at once:
+// a slow robot repeats rows and r falls fast). The virtual interval ends as a
+// real one would, and then (r̄ + r) / 2 becomes r̄.
 void CekfFilter::flush_if_needed() {
   if (!all_active_) {
     if (n0_ <= max_active_ && na_ <= max_active_) return;
@@ -487,11 +488,12 @@ void CekfFilter::flush_if_needed() {
     global_update(churn);
     return;
   }
-  const double ratio = cost_ratio(virtual_basis_, virtual_active_);
-  if (ratio < kReturnShare) {
-    churn_ratio_ = ratio;
+  const double mean = 0.5 * (churn_ratio_ + cost_ratio(virtual_basis_, virtual_active_));
+  if (mean < kReturnShare) {
+    churn_ratio_ = mean;
     global_update(false);
   } else if (virtual_basis_ > max_active_ || virtual_active_ > max_active_) {
+    churn_ratio_ = mean;
     start_interval();
   }
 }

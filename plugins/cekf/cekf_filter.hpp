@@ -86,8 +86,10 @@ class CekfFilter final : public Estimator {
   /// Back to the compressed form when a virtual global update would have cost
   /// less than this share of the EKF's updates (below 1: hysteresis).
   static constexpr double kReturnShare = 0.8;
-  /// Cost ratios (global update / EKF updates) are capped at this.
-  static constexpr double kMaxCostRatio = 4.0;
+  /// Cost ratios (global update / EKF updates) are capped at this, so that an
+  /// interval of augmentations alone (the EKF pays almost nothing) weighs no
+  /// more than one where compression clearly lost.
+  static constexpr double kMaxCostRatio = 2.0;
 
   /// `max_active` (≥ 1): active rows or basis rows that trigger a global update.
   /// `keep_steps` (≥ 0): a row touched within this many updates stays active
