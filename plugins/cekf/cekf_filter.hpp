@@ -34,14 +34,15 @@
 // every update brings new rows, the basis fills after a few updates and the
 // global updates cost more than the EKF's updates of the same interval would
 // have. With `churn_fallback` (the default) the filter compares the two at
-// every global update (leading terms, see global_update_cost(); averaged
-// over intervals) and, when the compressed form lost, makes every row active: A = all, no basis, and each
-// update is the EKF's own (eqs. 28–32 on the whole covariance). Meanwhile it
-// counts the basis and A that a compressed partition would have had (the
-// rows touched since a virtual global update); as soon as that virtual
-// global update would cost less than kReturnShare of the EKF's updates since
-// the virtual interval began, the filter compresses again. Both switches are global
-// updates, exact as every other: the numbers stay the EKF's.
+// every global update (leading terms, see global_update_cost()) and keeps a
+// running mean r̄ of their ratio; when r̄ > 1 it makes every row active:
+// A = all, no basis, and each update is the EKF's own (eqs. 28–32 on the
+// whole covariance). Meanwhile it counts the basis and A that a compressed
+// partition would have had (the rows touched since a virtual global update)
+// and compresses again as soon as the mean with that virtual global update's
+// ratio falls below kReturnShare (see flush_if_needed()). Both switches are
+// global updates, exact as every other: the numbers stay the EKF's.
+// docs/performance.md has the measurements.
 //
 // Defaults: max_active = 96 and keep_steps = 8 gave the shortest Victoria Park
 // run (config/victoria_park.yaml) and are near the best of BM_CekfMaxActive in
