@@ -45,8 +45,11 @@ void compact_lower(Eigen::MatrixXd& m, const std::vector<int>& keep) {
 
 }  // namespace
 
-CekfFilter::CekfFilter(int max_active, int keep_steps, bool observability_constrained)
-    : max_active_(max_active), keep_steps_(keep_steps), constrained_(observability_constrained) {
+CekfFilter::CekfFilter(int max_active, int keep_steps, bool observability_constrained, bool churn_fallback)
+    : max_active_(max_active),
+      keep_steps_(keep_steps),
+      constrained_(observability_constrained),
+      churn_fallback_(churn_fallback) {
   if (max_active < 1) {
     throw std::invalid_argument("cekf: max_active must be at least 1, got " + std::to_string(max_active));
   }
@@ -64,6 +67,13 @@ void CekfFilter::reset(const Eigen::MatrixXd& P_rr) {
   std::iota(slot_.begin(), slot_.end(), 0);
   active_ = slot_;
   touched_.assign(static_cast<std::size_t>(k_), 0);
+  seen_in_.assign(static_cast<std::size_t>(k_), 0);
+  all_active_ = false;
+  interval_ = 0;
+  interval_rows_ = 0;
+  virtual_basis_ = virtual_active_ = 0;
+  fallbacks_ = 0;
+  churn_ratio_ = -1.0;
   slot_live_.assign(static_cast<std::size_t>(k_), 1);
   dead_slots_ = 0;
   updates_ = 0;
@@ -156,6 +166,7 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
   refresh_memo(V);
 
   ++updates_;
+  interval_rows_ += s.eta.size();
   touch(s.union_idx);
   flush_if_needed();
   return dx;
@@ -186,8 +197,10 @@ int CekfFilter::augment(const StateAugmentation& aug) {
     slot_.push_back(ns_ + r);
     active_.push_back(na_ + r);
     touched_.push_back(updates_);
+    seen_in_.push_back(interval_);  // active from birth: never in the basis
     slot_live_.push_back(1);
   }
+  if (all_active_) virtual_active_ += added;
   n_ += added;
   na_ += added;
   ns_ += added;
@@ -222,31 +235,40 @@ Eigen::MatrixXd CekfFilter::active_block(const std::vector<int>& rows, const std
 // row a and G_j of a passive row j, P_aj = Φ_a G_j and P_ij = P⁰_ij − G_iᵀ Ψ G_j.
 Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std::vector<int>& cols,
                                         bool symmetric) const {
+  // The kernel's gating calls this (symmetric, the robot and one passive
+  // feature) for every feature in range at every reading: the symmetric case
+  // copies nothing twice.
   Eigen::MatrixXd out(static_cast<Index>(rows.size()), static_cast<Index>(cols.size()));
-  const Split r = split(rows), c = split(cols);
+  const Split r = split(rows);
+  const Split c = symmetric ? Split() : split(cols);
+  const Split& cs = symmetric ? r : c;
   const auto basis = Eigen::seqN(0, n0_);
   const Eigen::MatrixXd g_rows = gt_(r.passive_slot, basis).transpose();  // G_i, n0 × |rows in B|
-  const Eigen::MatrixXd g_cols = symmetric ? g_rows : Eigen::MatrixXd(gt_(c.passive_slot, basis).transpose());
+  const Eigen::MatrixXd g_other =
+      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(gt_(c.passive_slot, basis).transpose());
+  const Eigen::MatrixXd& g_cols = symmetric ? g_rows : g_other;
   // A handful of rows and columns: coefficient-wise products of copied rows
   // beat blocked products.
   const Eigen::MatrixXd phi_rows = phi_(r.active_pos, basis);
   const Eigen::MatrixXd ab = phi_rows.lazyProduct(g_cols);
-  const Eigen::MatrixXd ba =
-      symmetric ? ab : Eigen::MatrixXd(Eigen::MatrixXd(phi_(c.active_pos, basis)).lazyProduct(g_rows));
-  const Eigen::MatrixXd bb =
-      symmetric ? passive_quadratic(r.passive_slot, g_rows) : Eigen::MatrixXd(g_rows.transpose() * psi_times(g_cols));
+  const Eigen::MatrixXd ba_other =
+      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(Eigen::MatrixXd(phi_(c.active_pos, basis)).lazyProduct(g_rows));
+  const Eigen::MatrixXd& ba = symmetric ? ab : ba_other;
+  const Eigen::MatrixXd bb_other =
+      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(g_rows.transpose() * psi_times(g_cols));
+  const Eigen::MatrixXd& bb = symmetric ? passive_quadratic(r.passive_slot, g_rows) : bb_other;
   for (std::size_t i = 0; i < r.active_at.size(); ++i) {
-    for (std::size_t j = 0; j < c.active_at.size(); ++j)
-      out(r.active_at[i], c.active_at[j]) = paa(r.active_pos[i], c.active_pos[j]);
-    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
-      out(r.active_at[i], c.passive_at[j]) = ab(static_cast<Index>(i), static_cast<Index>(j));
+    for (std::size_t j = 0; j < cs.active_at.size(); ++j)
+      out(r.active_at[i], cs.active_at[j]) = paa(r.active_pos[i], cs.active_pos[j]);
+    for (std::size_t j = 0; j < cs.passive_at.size(); ++j)
+      out(r.active_at[i], cs.passive_at[j]) = ab(static_cast<Index>(i), static_cast<Index>(j));
   }
   for (std::size_t i = 0; i < r.passive_at.size(); ++i) {
-    for (std::size_t j = 0; j < c.active_at.size(); ++j)
-      out(r.passive_at[i], c.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
-    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
-      out(r.passive_at[i], c.passive_at[j]) =
-          p0(r.passive_slot[i], c.passive_slot[j]) - bb(static_cast<Index>(i), static_cast<Index>(j));
+    for (std::size_t j = 0; j < cs.active_at.size(); ++j)
+      out(r.passive_at[i], cs.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
+    for (std::size_t j = 0; j < cs.passive_at.size(); ++j)
+      out(r.passive_at[i], cs.passive_at[j]) =
+          p0(r.passive_slot[i], cs.passive_slot[j]) - bb(static_cast<Index>(i), static_cast<Index>(j));
   }
   return out;
 }
@@ -282,22 +304,36 @@ void CekfFilter::remove(std::vector<int> idx) {
     slot_[w] = slot_[i];
     active_[w] = active_[i] >= 0 ? new_position[static_cast<std::size_t>(active_[i])] : -1;
     touched_[w] = touched_[i];
+    seen_in_[w] = seen_in_[i];
     ++w;
   }
   slot_.resize(w);
   active_.resize(w);
   touched_.resize(w);
+  seen_in_.resize(w);
   n_ = static_cast<int>(w);
   if (constrained_) U_.keep_rows(kept_rows);
 }
 
-// The global update: (I) written out, then a new partition with Φ = I, Ψ = 0.
-void CekfFilter::flush() {
+void CekfFilter::flush() { global_update(false); }
+
+// The global update: (I) written out, then a new partition with Φ = I, Ψ = 0:
+// A = the robot and the recent rows, or (all_rows) every row.
+void CekfFilter::global_update(bool all_rows) {
+  reserve_store();
   memo_.clear();  // Ψ becomes 0
   if (n0_ > 0) refresh_passive_block();
   write_active_rows_into_store();
   if (dead_slots_ > 0) drop_dead_slots();
-  repartition(choose_active());
+  if (all_rows) {
+    std::vector<int> all(static_cast<std::size_t>(n_));
+    std::iota(all.begin(), all.end(), 0);
+    repartition(all);
+  } else {
+    repartition(choose_active());
+  }
+  all_active_ = all_rows;
+  start_interval();
   ++global_updates_;
 }
 
@@ -326,6 +362,7 @@ void CekfFilter::activate(const std::vector<int>& rows) {
   std::sort(passive.begin(), passive.end());
   passive.erase(std::unique(passive.begin(), passive.end()), passive.end());
   if (passive.empty()) return;
+  reserve_store();
   const auto t = static_cast<int>(passive.size());
   std::vector<int> slots;
   for (int i : passive) slots.push_back(slot_[static_cast<std::size_t>(i)]);
@@ -356,7 +393,7 @@ void CekfFilter::activate(const std::vector<int>& rows) {
 
 // ---------------------------------------------------------------- memo
 
-Eigen::MatrixXd CekfFilter::passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const {
+const Eigen::MatrixXd& CekfFilter::passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const {
   auto [entry, added] = memo_.try_emplace(slots);
   if (added) entry->second.quadratic = g.transpose() * psi_times(g);
   entry->second.asked = true;
@@ -383,11 +420,82 @@ void CekfFilter::refresh_memo(const Eigen::MatrixXd& V) {
 }
 
 void CekfFilter::touch(const std::vector<int>& rows) {
-  for (int i : rows) touched_[static_cast<std::size_t>(i)] = updates_;
+  for (int i : rows) {
+    const auto u = static_cast<std::size_t>(i);
+    touched_[u] = updates_;
+    if (seen_in_[u] == interval_) continue;
+    seen_in_[u] = interval_;  // first touch in this interval: activated in the compressed form
+    if (all_active_) {
+      ++virtual_basis_;
+      ++virtual_active_;
+    }
+  }
 }
 
+// ---------------------------------------------------------------- churn
+
+// Costs in multiply–adds, leading terms only. A global update after an
+// interval with basis n0 and active part n_A: P⁰_BB − Gᵀ Ψ G over the lower
+// triangle (ns² n0 / 2) with Ψ Gᵀ (ns n0²), and P_AB = Φ G (n_A n0 ns).
+// The plain EKF pays ns² m / 2 for each update of m rows (eq. 32 on the whole
+// covariance), so ns² r / 2 for the interval's r rows.
+double CekfFilter::global_update_cost(int basis, int active) const {
+  const auto ns = static_cast<double>(ns_), n0 = static_cast<double>(basis);
+  return ns * ns * n0 / 2.0 + ns * n0 * (n0 + static_cast<double>(active));
+}
+
+double CekfFilter::ekf_interval_cost() const {
+  const auto ns = static_cast<double>(ns_);
+  return ns * ns * static_cast<double>(interval_rows_) / 2.0;
+}
+
+void CekfFilter::start_interval() {
+  ++interval_;
+  interval_rows_ = 0;
+  if (!all_active_) return;
+  // The partition a global update would choose now (robot and recent rows) is
+  // the virtual interval's starting basis.
+  const std::vector<int> kept = choose_active();
+  for (int i : kept) seen_in_[static_cast<std::size_t>(i)] = interval_;
+  virtual_basis_ = virtual_active_ = static_cast<int>(kept.size());
+}
+
+// Global update cost over the EKF's cost of the interval's updates, capped at
+// kMaxCostRatio (an interval of augmentations only costs the EKF almost nothing).
+double CekfFilter::cost_ratio(int basis, int active) const {
+  const double global = global_update_cost(basis, active), ekf = ekf_interval_cost();
+  if (global <= 0.0) return 0.0;
+  return global >= kMaxCostRatio * ekf ? kMaxCostRatio : global / ekf;
+}
+
+// Compressed: a global update when the basis or A outgrow max_active. The
+// ratio of its cost to the EKF's updates of the interval is averaged over
+// intervals (r̄ ← (r̄ + r) / 2, so one unlucky interval does not decide); when
+// r̄ > 1 the next partition is A = everything (updates are the EKF's, no global
+// updates). All active: after every call, the ratio r of the global update of
+// a virtual compressed filter (its basis and A counted by touch() and
+// augment()) to the EKF's updates since its interval began enters the same
+// mean; when (r̄ + r) / 2 < kReturnShare the filter compresses again (at once:
+// a slow robot repeats rows and r falls fast). The virtual interval ends as a
+// real one would, and then (r̄ + r) / 2 becomes r̄.
 void CekfFilter::flush_if_needed() {
-  if (n0_ > max_active_ || na_ > max_active_) flush();
+  if (!all_active_) {
+    if (n0_ <= max_active_ && na_ <= max_active_) return;
+    const double ratio = cost_ratio(n0_, na_);
+    churn_ratio_ = churn_ratio_ < 0.0 ? ratio : 0.5 * (churn_ratio_ + ratio);
+    const bool churn = churn_fallback_ && churn_ratio_ > 1.0;
+    if (churn) ++fallbacks_;
+    global_update(churn);
+    return;
+  }
+  const double mean = 0.5 * (churn_ratio_ + cost_ratio(virtual_basis_, virtual_active_));
+  if (mean < kReturnShare) {
+    churn_ratio_ = mean;
+    global_update(false);
+  } else if (virtual_basis_ > max_active_ || virtual_active_ > max_active_) {
+    churn_ratio_ = mean;
+    start_interval();
+  }
 }
 
 // ---------------------------------------------------------------- global update
@@ -402,17 +510,20 @@ void CekfFilter::refresh_passive_block() {
 }
 
 // The rows of A into the store: P_AB = Φ G against every slot, then P_AA.
+// (No basis: every row is active, P_AA is all of it.)
 void CekfFilter::write_active_rows_into_store() {
   std::vector<int> slot_of(static_cast<std::size_t>(na_));
   for (int i = 0; i < n_; ++i) {
     const auto u = static_cast<std::size_t>(i);
     if (active_[u] >= 0) slot_of[static_cast<std::size_t>(active_[u])] = slot_[u];
   }
-  const Eigen::MatrixXd pab = phi_.topLeftCorner(na_, n0_) * gt_.topLeftCorner(ns_, n0_).transpose();
-  for (int a = 0; a < na_; ++a) {
-    const int s = slot_of[static_cast<std::size_t>(a)];
-    p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
-    p0_.row(s).head(s) = pab.row(a).head(s);
+  if (n0_ > 0) {
+    const Eigen::MatrixXd pab = phi_.topLeftCorner(na_, n0_) * gt_.topLeftCorner(ns_, n0_).transpose();
+    for (int a = 0; a < na_; ++a) {
+      const int s = slot_of[static_cast<std::size_t>(a)];
+      p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
+      p0_.row(s).head(s) = pab.row(a).head(s);
+    }
   }
   for (int b = 0; b < na_; ++b) {
     for (int a = b; a < na_; ++a) {
@@ -460,12 +571,14 @@ std::vector<int> CekfFilter::choose_active() const {
 
 // With the store holding the full covariance P⁰: A = active_rows, B = the
 // rest, P_AA = P⁰_AA, G = P⁰_{A,B} (so a0 = A), Φ = I, Ψ = 0, and (I) holds.
+// With every row in A there is no B and no basis (n0 = 0).
 void CekfFilter::repartition(const std::vector<int>& active_rows) {
   const auto na = static_cast<int>(active_rows.size());
+  const int n0 = na < n_ ? na : 0;
   na_ = 0;  // nothing of the old Φ, Ψ, G, P_AA is kept
   n0_ = 0;
   reserve_active(na);
-  reserve_basis(na);
+  reserve_basis(n0);
   std::fill(active_.begin(), active_.end(), -1);
   std::vector<int> slots;
   for (int c = 0; c < na; ++c) {
@@ -476,11 +589,12 @@ void CekfFilter::repartition(const std::vector<int>& active_rows) {
   for (int b = 0; b < na; ++b) {
     for (int a = b; a < na; ++a)
       paa_(a, b) = p0(slots[static_cast<std::size_t>(a)], slots[static_cast<std::size_t>(b)]);
-    p0_column(slots[static_cast<std::size_t>(b)], gt_.col(b).head(ns_));
+    if (n0 > 0) p0_column(slots[static_cast<std::size_t>(b)], gt_.col(b).head(ns_));
   }
-  phi_.topLeftCorner(na, na).setIdentity();
-  psi_.topLeftCorner(na, na).setZero();
-  na_ = n0_ = na;
+  phi_.topLeftCorner(na, n0).setIdentity();
+  psi_.topLeftCorner(n0, n0).setZero();
+  na_ = na;
+  n0_ = n0;
 }
 
 // ---------------------------------------------------------------- storage
@@ -558,9 +672,15 @@ void CekfFilter::reserve_basis(int cols) {
   grow(gt_, gt_.rows(), cols, ns_, n0_);
 }
 
-void CekfFilter::reserve_slots(int slots) {
-  grow(p0_, slots, slots, ns_, ns_);
-  grow(gt_, slots, gt_.cols(), ns_, n0_);
+void CekfFilter::reserve_slots(int slots) { grow(gt_, slots, gt_.cols(), ns_, n0_); }
+
+// The P⁰ store grows only when it is read or written (activation, global
+// update), not with every augmentation: with every row active (churn) it is
+// not touched until the next global update. Slots beyond its old size belong
+// to rows created since, all active: their entries are stale anyway.
+void CekfFilter::reserve_store() {
+  const Index used = std::min<Index>(ns_, p0_.rows());
+  grow(p0_, ns_, ns_, used, used);
 }
 
 }  // namespace mspace::cekf

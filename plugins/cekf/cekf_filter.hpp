@@ -29,6 +29,21 @@
 // P_BB corrections it computed, see memo_, so the kernel's gating, which asks
 // about the same features at every reading, stays cheap).
 //
+// Churn (issue 13). A global update costs O(n_B² n0) however few updates
+// came before it; the EKF pays O(N² m) per update. When the robot moves fast
+// every update brings new rows, the basis fills after a few updates and the
+// global updates cost more than the EKF's updates of the same interval would
+// have. With `churn_fallback` (the default) the filter compares the two at
+// every global update (leading terms, see global_update_cost()) and keeps a
+// running mean r̄ of their ratio; when r̄ > 1 it makes every row active:
+// A = all, no basis, and each update is the EKF's own (eqs. 28–32 on the
+// whole covariance). Meanwhile it counts the basis and A that a compressed
+// partition would have had (the rows touched since a virtual global update)
+// and compresses again as soon as the mean with that virtual global update's
+// ratio falls below kReturnShare (see flush_if_needed()). Both switches are
+// global updates, exact as every other: the numbers stay the EKF's.
+// docs/performance.md has the measurements.
+//
 // Defaults: max_active = 96 and keep_steps = 8 gave the shortest Victoria Park
 // run (config/victoria_park.yaml) and are near the best of BM_CekfMaxActive in
 // tests/bench/bench_cekf.cpp.
@@ -69,12 +84,20 @@ class CekfFilter final : public Estimator {
  public:
   static constexpr int kDefaultMaxActive = 96;
   static constexpr int kDefaultKeepSteps = 8;
+  /// Back to the compressed form when a virtual global update would have cost
+  /// less than this share of the EKF's updates (below 1: hysteresis).
+  static constexpr double kReturnShare = 0.8;
+  /// Cost ratios (global update / EKF updates) are capped at this, so that an
+  /// interval of augmentations alone (the EKF pays almost nothing) weighs no
+  /// more than one where compression clearly lost.
+  static constexpr double kMaxCostRatio = 2.0;
 
   /// `max_active` (≥ 1): active rows or basis rows that trigger a global update.
   /// `keep_steps` (≥ 0): a row touched within this many updates stays active
   /// across a global update. `observability_constrained`: the mode described above.
+  /// `churn_fallback`: EKF updates while the active set churns (see "Churn" above).
   explicit CekfFilter(int max_active = kDefaultMaxActive, int keep_steps = kDefaultKeepSteps,
-                      bool observability_constrained = false);
+                      bool observability_constrained = false, bool churn_fallback = true);
 
   void reset(const Eigen::MatrixXd& P_rr) override;
   int dim() const override { return n_; }
@@ -103,6 +126,10 @@ class CekfFilter final : public Estimator {
   bool is_active(int i) const { return active_.at(static_cast<std::size_t>(i)) >= 0; }
   /// Global updates done since reset() (flush() calls included).
   std::int64_t global_updates() const { return global_updates_; }
+  /// Whether every row is active because the active set churned (see "Churn").
+  bool all_active() const { return all_active_; }
+  /// Times since reset() the filter made every row active because of churn.
+  std::int64_t fallbacks() const { return fallbacks_; }
   bool observability_constrained() const { return constrained_; }
   /// The unobservable directions U (dim() × u) in observability-constrained
   /// mode; 0 × 0 otherwise.
@@ -127,7 +154,7 @@ class CekfFilter final : public Estimator {
   };
   Split split(const std::vector<int>& idx) const;
   /// G_Jᵀ Ψ G_J for the passive slots J with g = G_{:,J}, from the memo if there.
-  Eigen::MatrixXd passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const;
+  const Eigen::MatrixXd& passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const;
   /// Brings the memo up to date with Ψ ← Ψ + V Vᵀ and drops the blocks not asked about.
   void refresh_memo(const Eigen::MatrixXd& V);
   /// Ψ g (n0 × g.cols()).
@@ -145,6 +172,16 @@ class CekfFilter final : public Estimator {
   void activate(const std::vector<int>& rows);
   void touch(const std::vector<int>& rows);
   void flush_if_needed();
+  /// The global update; the new A is every row (all_rows) or choose_active().
+  void global_update(bool all_rows);
+  /// Multiply–adds of a global update with the given basis and active sizes.
+  double global_update_cost(int basis, int active) const;
+  /// Multiply–adds the plain EKF spent on this interval's updates.
+  double ekf_interval_cost() const;
+  /// global_update_cost(basis, active) / ekf_interval_cost(), in [0, kMaxCostRatio].
+  double cost_ratio(int basis, int active) const;
+  /// A new (real or, all active, virtual) interval between global updates.
+  void start_interval();
   void refresh_passive_block();
   void write_active_rows_into_store();
   void drop_dead_slots();
@@ -155,10 +192,12 @@ class CekfFilter final : public Estimator {
   void reserve_active(int rows);
   void reserve_basis(int cols);
   void reserve_slots(int slots);
+  void reserve_store();
 
   int max_active_;
   int keep_steps_;
   bool constrained_;                             ///< observability-constrained mode
+  bool churn_fallback_;                          ///< see "Churn"
   estimator_support::UnobservableDirections U_;  ///< dim() × u (constrained mode only)
 
   int k_ = 0;   ///< robot pose dimension (rows 0..k−1, always active at positions 0..k−1)
@@ -171,6 +210,16 @@ class CekfFilter final : public Estimator {
   std::vector<int> slot_;              ///< its slot in the P⁰ store
   std::vector<int> active_;            ///< its position in A, −1 when passive
   std::vector<std::int64_t> touched_;  ///< value of updates_ when last touched
+  std::vector<std::int64_t> seen_in_;  ///< interval_ when last touched or created
+
+  // Churn (see above).
+  bool all_active_ = false;         ///< A = every row, no basis
+  std::int64_t interval_ = 0;       ///< number of the interval since the last (virtual) global update
+  std::int64_t interval_rows_ = 0;  ///< measurement rows of the updates in it
+  int virtual_basis_ = 0;           ///< all active: the basis a compressed partition would have
+  int virtual_active_ = 0;          ///< all active: the A it would have
+  std::int64_t fallbacks_ = 0;
+  double churn_ratio_ = -1.0;       ///< running mean of cost_ratio() at global updates (< 0: none yet)
 
   std::vector<char> slot_live_;  ///< per slot: still owned by a state row
   int dead_slots_ = 0;

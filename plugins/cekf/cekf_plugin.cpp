@@ -11,7 +11,8 @@ using mspace::cekf::CekfFilter;
 std::unique_ptr<mspace::PluginObject> make_cekf(const mspace::PluginArgs& args) {
   const auto max_active = static_cast<int>(args.params.get_int("max_active"));
   const auto keep_steps = static_cast<int>(args.params.get_int("keep_steps"));
-  return std::make_unique<CekfFilter>(max_active, keep_steps, args.params.get_bool("observability_constrained"));
+  return std::make_unique<CekfFilter>(max_active, keep_steps, args.params.get_bool("observability_constrained"),
+                                      args.params.get_bool("churn_fallback"));
 }
 
 mspace::PluginDescriptor describe() {
@@ -37,6 +38,10 @@ mspace::PluginDescriptor describe() {
                          "in ekf: carry the unobservable global motion of robot and map through every "
                          "step and project it out of each observation's Jacobian, so no update "
                          "informs it"),
+      mspace::param_bool("churn_fallback", true,
+                         "when a global update costs more than the full EKF's updates since the last one "
+                         "(the active set churns, e.g. a fast robot), make every row active and update as "
+                         "the EKF does, until compressing would pay again; results are the same either way"),
   };
   d.factory = &make_cekf;
   return d;

@@ -15,8 +15,20 @@
 //
 // BM_CekfMaxActive runs the cekf at N = 1000 for several max_active.
 //
+// BM_RangeBearing (issue 13): whole runs of range_bearing_scenario.hpp — 500 /
+// 1000 / 2000 landmarks, 1000 steps at 1, 2, 5 and 10 m per step — for the ekf
+// (cekf:0), the cekf with its defaults (cekf:1) and the cekf without its churn
+// fallback (cekf:2, the algorithm before issue 13), on identical input
+// (tests/cekf checks that they give the same final state). The time
+// is the whole run (predict, update, augment and the driver's own arithmetic);
+// the log is generated before the clock starts. Counters: state_dim at the
+// end, rows (measurement rows in updates), global (cekf global updates),
+// fallbacks (cekf switches to every row active).
+//   ./build/bin/bench_cekf --benchmark_filter=RangeBearing --benchmark_counters_tabular=true
+//
 // Counters: state_dim; for the cekf, global_per_kstep (global updates per
-// 1000 steps), active_dim and basis_dim at the end.
+// 1000 steps), active_dim and basis_dim at the end, fallbacks (to every row
+// active, see cekf_filter.hpp; none expected here).
 //
 //   ./build/bin/bench_cekf --benchmark_counters_tabular=true
 #include <benchmark/benchmark.h>
@@ -29,6 +41,7 @@
 
 #include "../../plugins/cekf/cekf_filter.hpp"
 #include "mspace/ekf_filter.hpp"
+#include "range_bearing_scenario.hpp"
 
 namespace {
 
@@ -151,6 +164,7 @@ void BM_CekfLocalStep(benchmark::State& state) {
       1000.0 * static_cast<double>(cekf.global_updates() - before) / static_cast<double>(steps);
   state.counters["active_dim"] = cekf.active_dim();
   state.counters["basis_dim"] = cekf.basis_dim();
+  state.counters["fallbacks"] = static_cast<double>(cekf.fallbacks());
 }
 
 BENCHMARK(BM_EkfLocalStep)
@@ -183,6 +197,35 @@ BENCHMARK(BM_CekfLocalStep)
     ->MinTime(2.0)
     ->Repetitions(3)
     ->ReportAggregatesOnly(true);
+
+/// Arguments: landmarks, speed (m per step), estimator (0 ekf, 1 cekf, 2 cekf without churn fallback).
+void BM_RangeBearing(benchmark::State& state) {
+  mspace::bench::RangeBearingSettings settings;
+  settings.landmarks = static_cast<int>(state.range(0));
+  settings.speed = static_cast<double>(state.range(1));
+  const mspace::bench::RangeBearingLog log = mspace::bench::make_range_bearing_log(settings);
+  const bool compressed = state.range(2) > 0;
+  for (auto _ : state) {
+    EkfFilter ekf;
+    CekfFilter cekf(CekfFilter::kDefaultMaxActive, CekfFilter::kDefaultKeepSteps, false, state.range(2) == 1);
+    Estimator& filter = compressed ? static_cast<Estimator&>(cekf) : ekf;
+    const mspace::bench::RangeBearingResult result = mspace::bench::run_estimator(filter, log);
+    benchmark::DoNotOptimize(result.mean.data());
+    state.counters["state_dim"] = filter.dim();
+    state.counters["rows"] = result.rows;
+    state.counters["global"] = compressed ? static_cast<double>(cekf.global_updates()) : 0.0;
+    state.counters["fallbacks"] = compressed ? static_cast<double>(cekf.fallbacks()) : 0.0;
+  }
+}
+
+BENCHMARK(BM_RangeBearing)
+    ->ArgNames({"landmarks", "speed", "cekf"})
+    ->ArgsProduct({{500, 1000, 2000}, {1, 2, 5, 10}, {0, 1, 2}})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->Repetitions(5)
+    ->ReportAggregatesOnly(true)
+    ->UseRealTime();
 
 }  // namespace
 

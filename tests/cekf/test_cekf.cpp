@@ -5,7 +5,10 @@
 // passive rows and global updates — and reject bad input exactly as the EKF
 // does (with "cekf" in the messages). The same holds with the
 // observability-constrained option on in both filters; off, the option changes
-// nothing, bit for bit.
+// nothing, bit for bit. On whole runs of issue 13's range-bearing scenario
+// (tests/bench/range_bearing_scenario.hpp) at a slow and a fast robot, the
+// final state of the ekf and the cekf (with and without its churn fallback)
+// agree to 1e-9, and the fallback engages only for the fast robot.
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -19,6 +22,7 @@
 #include <vector>
 
 #include "../../plugins/cekf/cekf_filter.hpp"
+#include "../bench/range_bearing_scenario.hpp"
 #include "mspace/ekf_filter.hpp"
 
 namespace {
@@ -89,11 +93,15 @@ struct Twin {
   std::vector<std::vector<int>> features;
   std::mt19937 rng;
   double worst = 0.0;     ///< largest relative difference seen
-  int passive_steps = 0;  ///< steps that started with at least one passive row
-  VectorXd last_dx;       ///< the CEKF's δx of the latest update
+  int passive_steps = 0;     ///< steps that started with at least one passive row
+  int all_active_steps = 0;  ///< steps that started with every row active after churn
+  VectorXd last_dx;          ///< the CEKF's δx of the latest update
 
-  Twin(int max_active, int keep_steps, unsigned seed, Constraint constraint = Constraint::Off)
-      : ekf(64, option_on(constraint)), cekf(max_active, keep_steps, option_on(constraint)), rng(seed) {
+  Twin(int max_active, int keep_steps, unsigned seed, Constraint constraint = Constraint::Off,
+       bool churn_fallback = true)
+      : ekf(64, option_on(constraint)),
+        cekf(max_active, keep_steps, option_on(constraint), churn_fallback),
+        rng(seed) {
     const MatrixXd P_rr = random_spd(kRobotDim, 0.5, rng);
     ekf.reset(P_rr);
     cekf.reset(P_rr);
@@ -206,6 +214,7 @@ struct Twin {
   /// One random operation; the map grows towards `target_dim` rows.
   void step(int target_dim) {
     if (any_passive()) ++passive_steps;
+    if (cekf.all_active()) ++all_active_steps;
     const int op = uniform_int(0, 99);
     if (op < 25) {
       predict();
@@ -236,33 +245,46 @@ struct SequenceCase {
   int target_dim;
   int steps;
   unsigned seed;
+  bool churn_fallback;  ///< on: both forms (compressed, all active) must have been used
 };
+
+/// The sequence exercised what its case is about: global updates, passive rows
+/// and, with the churn fallback, stretches with every row active.
+void expect_both_forms_used(const SequenceCase& c, const Twin& twin) {
+  EXPECT_GT(twin.cekf.global_updates(), 0);
+  if (!c.churn_fallback) {
+    EXPECT_GT(twin.passive_steps, c.steps / 4);
+    EXPECT_EQ(twin.all_active_steps, 0);
+    EXPECT_EQ(twin.cekf.fallbacks(), 0);
+    return;
+  }
+  EXPECT_GT(twin.passive_steps, c.steps / 10);
+  EXPECT_GT(twin.all_active_steps, c.steps / 10);
+  EXPECT_GT(twin.cekf.fallbacks(), 1);  // so it also went back to the compressed form
+}
 
 class CekfSequence : public ::testing::TestWithParam<SequenceCase> {};
 
 TEST_P(CekfSequence, AgreesWithTheEkfAtEveryStep) {
   const SequenceCase c = GetParam();
-  Twin twin(c.max_active, c.keep_steps, c.seed);
+  Twin twin(c.max_active, c.keep_steps, c.seed, Constraint::Off, c.churn_fallback);
   for (int s = 0; s < c.steps; ++s) {
     twin.step(c.target_dim);
     if (HasFailure()) FAIL() << "first disagreement at step " << s;
   }
   EXPECT_LE(twin.worst, kRelTol);
-  // The sequence really exercised the compressed form.
-  EXPECT_GT(twin.cekf.global_updates(), 0);
-  EXPECT_GT(twin.passive_steps, c.steps / 4);
+  expect_both_forms_used(c, twin);
 }
 
 TEST_P(CekfSequence, ObservabilityConstrainedAgreesWithTheConstrainedEkfAtEveryStep) {
   const SequenceCase c = GetParam();
-  Twin twin(c.max_active, c.keep_steps, c.seed, Constraint::On);
+  Twin twin(c.max_active, c.keep_steps, c.seed, Constraint::On, c.churn_fallback);
   for (int s = 0; s < c.steps; ++s) {
     twin.step(c.target_dim);
     if (HasFailure()) FAIL() << "first disagreement at step " << s;
   }
   EXPECT_LE(twin.worst, kRelTol);
-  EXPECT_GT(twin.cekf.global_updates(), 0);
-  EXPECT_GT(twin.passive_steps, c.steps / 4);
+  expect_both_forms_used(c, twin);
   // The directions were carried over every row: 3 of them, the robot rows
   // moved by the predictions (no longer the initial global motion).
   ASSERT_EQ(twin.cekf.unobservable().rows(), twin.cekf.dim());
@@ -270,13 +292,17 @@ TEST_P(CekfSequence, ObservabilityConstrainedAgreesWithTheConstrainedEkfAtEveryS
   EXPECT_GT((twin.cekf.unobservable().topRows(kRobotDim) - global_motion(0.7, -1.2)).cwiseAbs().maxCoeff(), 0.1);
 }
 
-INSTANTIATE_TEST_SUITE_P(Sizes, CekfSequence,
-                         ::testing::Values(SequenceCase{1, 0, 40, 400, 1},   // a global update after every call
-                                           SequenceCase{12, 2, 60, 600, 2},  // small active part, many activations
-                                           SequenceCase{24, 5, 150, 800, 3},
-                                           SequenceCase{40, 1000, 300, 900,
-                                                        4},  // keep everything recent (capped at 20)
-                                           SequenceCase{1000, 3, 200, 600, 5}));  // global updates by flush() only
+// The compressed form alone (churn fallback off), then with the fallback
+// (random updates touch random rows: the active set churns).
+INSTANTIATE_TEST_SUITE_P(
+    Sizes, CekfSequence,
+    ::testing::Values(SequenceCase{1, 0, 40, 400, 1, false},      // a global update after every call
+                      SequenceCase{12, 2, 60, 600, 2, false},     // small active part, many activations
+                      SequenceCase{24, 5, 150, 800, 3, false},    //
+                      SequenceCase{40, 1000, 300, 900, 4, false},  // keep everything recent (capped at 20)
+                      SequenceCase{1000, 3, 200, 600, 5, false},  // global updates by flush() only
+                      SequenceCase{12, 2, 60, 600, 6, true},      //
+                      SequenceCase{24, 5, 150, 800, 7, true}));
 
 // ---------------------------------------------------------------------------
 // The compressed form itself.
@@ -635,5 +661,58 @@ TEST(CekfObservabilityConstrained, DirectionsAreChecked) {
   expect_throw_message<std::invalid_argument>([&] { f.update({o}); },
                                               "cekf update: observation 0: index 3 is out of range [0, 3)");
 }
+
+// ---------------------------------------------------------------------------
+// Whole runs of the range-bearing scenario (issue 13), ekf against cekf.
+
+struct ScenarioCase {
+  double speed;     ///< m per step
+  bool fast_robot;  ///< expected to make the cekf fall back to EKF updates
+};
+
+class CekfRangeBearing : public ::testing::TestWithParam<ScenarioCase> {};
+
+TEST_P(CekfRangeBearing, FinalStateIsTheEkfsWithAndWithoutTheChurnFallback) {
+  using namespace mspace::bench;
+  RangeBearingSettings settings;
+  settings.landmarks = 400;
+  settings.steps = 400;
+  settings.speed = GetParam().speed;
+  const RangeBearingLog log = make_range_bearing_log(settings);
+
+  EkfFilter ekf;
+  const RangeBearingResult reference = run_estimator(ekf, log);
+  ASSERT_GT(reference.rows, 1000);  // a real run: many updates, a map of many landmarks
+  ASSERT_GT(ekf.dim(), 3 + 2 * 100);
+  const MatrixXd C = ekf.covariance();
+
+  for (const bool fallback : {true, false}) {
+    SCOPED_TRACE(fallback ? "churn fallback on" : "churn fallback off");
+    // max_active 24: many global updates, as on a larger map with the default.
+    CekfFilter cekf(24, CekfFilter::kDefaultKeepSteps, false, fallback);
+    const RangeBearingResult result = run_estimator(cekf, log);
+    ASSERT_EQ(result.mean.size(), reference.mean.size());
+    EXPECT_LE((result.mean - reference.mean).cwiseAbs().maxCoeff(), 1e-9);
+    EXPECT_LE(relative_error(cekf.covariance(), C), kRelTol);
+    if (!fallback) {
+      EXPECT_GT(cekf.global_updates(), 10);
+      EXPECT_EQ(cekf.fallbacks(), 0);
+    } else if (GetParam().fast_robot) {
+      // Every update brings new rows: the filter ends with every row active.
+      EXPECT_GT(cekf.fallbacks(), 0);
+      EXPECT_TRUE(cekf.all_active());
+    } else {
+      // Updates revisit the same rows: compressed (at most one fallback, while
+      // the first landmarks were being added with few updates).
+      EXPECT_LE(cekf.fallbacks(), 1);
+      EXPECT_FALSE(cekf.all_active());
+      EXPECT_GT(cekf.global_updates(), 10);
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Speeds, CekfRangeBearing,
+                         ::testing::Values(ScenarioCase{1.0, false}, ScenarioCase{10.0, true}),
+                         [](const auto& info) { return info.param.fast_robot ? "Fast" : "Slow"; });
 
 }  // namespace
