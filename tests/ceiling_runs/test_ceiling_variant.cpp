@@ -2,8 +2,8 @@
 // lines + lamps run of config/ceiling_both.yaml on a sequence rendered by
 // CTest's fixture (tests/ceiling_runs/CMakeLists.txt: MSPACE_CEILING names the
 // folder, MSPACE_CEILING_VARIANT the variant). The route is the whole one,
-// back to the start, driven at 0.8 m/s (half the frames of the 0.4 m/s
-// route of test_ceiling_runs) so that nine of these stay quick.
+// back to the start; most variants drive it at 0.8 m/s (half the frames of
+// the 0.4 m/s route of test_ceiling_runs) so that nine of these stay quick.
 //
 // Targets (issue 6, for lines + lamps): heading error at return < 0.5°,
 // position error < 5 cm; and (issue 12) the robot NEES, averaged over the
