@@ -46,7 +46,8 @@
 // and k is solved for again: the noise the measurements show once the
 // robot's error (e.g. an odometry bias the motion model does not have) no
 // longer counts. Measured on the simulated run with σ set 2× and 0.7× the
-// truth: both k within 10 % of 1/2 and 1/0.7 (tests/run/test_sim_run.cpp).
+// truth: k = 0.46 and 1.29 (0.47 and 1.31 given the true pose) against the
+// true 0.5 and 1.43 (tests/run/test_sim_run.cpp).
 #pragma once
 
 #include <Eigen/Core>
