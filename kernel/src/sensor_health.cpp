@@ -31,10 +31,15 @@ double add_nis_on_grid(const Eigen::VectorXd& eta, const Eigen::MatrixXd& A, con
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(0.5 * (M + M.transpose()));
   const Eigen::VectorXd z = eig.eigenvectors().transpose() * llt.matrixL().solve(eta);
   const Eigen::VectorXd d = eig.eigenvalues().cwiseMax(0.0).cwiseMin(1.0);
+  // α − 1 at every grid point, computed once.
+  static const std::array<double, N> alpha_minus_1 = [] {
+    std::array<double, N> a{};
+    for (std::size_t g = 0; g < N; ++g) a[g] = scale_at(static_cast<int>(g)) * scale_at(static_cast<int>(g)) - 1.0;
+    return a;
+  }();
   for (std::size_t g = 0; g < N; ++g) {
-    const double k = scale_at(static_cast<int>(g));
     double nis = 0.0;
-    for (Eigen::Index i = 0; i < z.size(); ++i) nis += z[i] * z[i] / (1.0 + (k * k - 1.0) * d[i]);
+    for (Eigen::Index i = 0; i < z.size(); ++i) nis += z[i] * z[i] / (1.0 + alpha_minus_1[g] * d[i]);
     at_scale[g] += nis;
   }
   return z.squaredNorm();
