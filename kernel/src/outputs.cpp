@@ -15,6 +15,15 @@
 namespace mspace::kernel {
 namespace {
 
+/// The summary's comment on a σ factor of the health report (sensor_health.hpp).
+std::string sigma_scale_comment(int beyond, const char* how) {
+  std::string text = "extractor sigma x this makes the NIS its expectation (";
+  text += how;
+  text += ")";
+  if (beyond != 0) text += beyond < 0 ? "; below the range searched" : "; above the range searched";
+  return text;
+}
+
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 
 std::ofstream open_for_writing(const std::filesystem::path& file) {
@@ -277,6 +286,29 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
       y << YAML::Key << "mean_nis_per_row" << YAML::Value << h.mean_nis_per_row;
       y << YAML::Key << "expected_nis_per_row" << YAML::Value << h.expected_nis_per_row;
     }
+    if (!h.kinds.empty()) {
+      // Noise from data (sensor_health.hpp): per measurement kind, the factor
+      // on the extractor's σ that would make the NIS its expectation.
+      y << YAML::Key << "by_kind" << YAML::Value << YAML::BeginMap;
+      for (const KindNisReport& k : h.kinds) {
+        y << YAML::Key << k.kind << YAML::Value << YAML::BeginMap;
+        y << YAML::Key << "updates" << YAML::Value << k.updates;
+        y << YAML::Key << "rows" << YAML::Value << k.rows;
+        y << YAML::Key << "mean_nis" << YAML::Value << k.mean_nis;
+        y << YAML::Key << "expected_nis" << YAML::Value << k.expected_nis;
+        y << YAML::Key << "nis_ratio" << YAML::Value << k.nis_ratio;
+        y << YAML::Key << "sigma_scale" << YAML::Value << k.sigma_scale;
+        y << YAML::Comment(sigma_scale_comment(k.sigma_scale_beyond, "trusts the filter's robot covariance"));
+        if (k.true_pose_updates > 0) {
+          y << YAML::Key << "true_pose_updates" << YAML::Value << k.true_pose_updates;
+          y << YAML::Key << "nis_ratio_true_pose" << YAML::Value << k.nis_ratio_true_pose;
+          y << YAML::Key << "sigma_scale_true_pose" << YAML::Value << k.sigma_scale_true_pose;
+          y << YAML::Comment(sigma_scale_comment(k.sigma_scale_true_pose_beyond, "the robot's error taken out"));
+        }
+        y << YAML::EndMap;
+      }
+      y << YAML::EndMap;
+    }
     y << YAML::Key << "extract_seconds" << YAML::Value << h.extract_seconds;
     y << YAML::Key << "warnings" << YAML::Value << YAML::BeginSeq;
     for (const std::string& w : h.warnings) y << w;
@@ -391,6 +423,16 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
        << h.matched << " matched";
     if (h.updates > 0) os << std::setprecision(2) << ", NIS " << h.nis_ratio << "x expected" << std::setprecision(3);
     os << "\n";
+    for (const KindNisReport& k : h.kinds) {
+      os << std::setprecision(2) << "    " << k.kind << ": " << k.updates << " updates, NIS " << k.nis_ratio
+         << "x expected, consistent with sigma x " << (k.sigma_scale_beyond < 0 ? "<" : k.sigma_scale_beyond > 0 ? ">" : "")
+         << k.sigma_scale;
+      if (k.true_pose_updates > 0)
+        os << " (with the true robot pose: NIS " << k.nis_ratio_true_pose << "x, sigma x "
+           << (k.sigma_scale_true_pose_beyond < 0 ? "<" : k.sigma_scale_true_pose_beyond > 0 ? ">" : "")
+           << k.sigma_scale_true_pose << ")";
+      os << std::setprecision(3) << "\n";
+    }
     for (const std::string& w : h.warnings) os << "  WARNING: " << w << "\n";
     for (const std::string& n : h.notes) os << "  note: " << n << "\n";
   }

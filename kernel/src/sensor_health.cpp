@@ -1,11 +1,84 @@
 #include "sensor_health.hpp"
 
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <utility>
 
 #include "chi2.hpp"
 
 namespace mspace::kernel {
+namespace {
+
+/// k at grid point g: kScaleMin · 10^(g / kScaleSteps).
+double scale_at(int g) {
+  return SensorHealth::kScaleMin * std::pow(10.0, static_cast<double>(g) / SensorHealth::kScaleSteps);
+}
+
+/// NIS(α) = ηᵀ (A + α R)⁻¹ η at α = k² for every k of the grid, added to
+/// `at_scale` (the file comment of the header: one Cholesky factor of
+/// S = A + R and one eigen-decomposition of L⁻¹ R L⁻ᵀ). Returns NIS(1), or
+/// −1 when S is not positive definite (nothing added).
+template <std::size_t N>
+double add_nis_on_grid(const Eigen::VectorXd& eta, const Eigen::MatrixXd& A, const Eigen::MatrixXd& R,
+                       std::array<double, N>& at_scale) {
+  const Eigen::LLT<Eigen::MatrixXd> llt(A + R);
+  if (llt.info() != Eigen::Success) return -1.0;
+  const Eigen::MatrixXd Li_R = llt.matrixL().solve(R);                        // L⁻¹ R
+  const Eigen::MatrixXd M = llt.matrixL().solve(Li_R.transpose().eval());     // L⁻¹ R L⁻ᵀ
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(0.5 * (M + M.transpose()));
+  const Eigen::VectorXd z = eig.eigenvectors().transpose() * llt.matrixL().solve(eta);
+  const Eigen::VectorXd d = eig.eigenvalues().cwiseMax(0.0).cwiseMin(1.0);
+  // α − 1 at every grid point, computed once.
+  static const std::array<double, N> alpha_minus_1 = [] {
+    std::array<double, N> a{};
+    for (std::size_t g = 0; g < N; ++g) a[g] = scale_at(static_cast<int>(g)) * scale_at(static_cast<int>(g)) - 1.0;
+    return a;
+  }();
+  for (std::size_t g = 0; g < N; ++g) {
+    double nis = 0.0;
+    for (Eigen::Index i = 0; i < z.size(); ++i) nis += z[i] * z[i] / (1.0 + alpha_minus_1[g] * d[i]);
+    at_scale[g] += nis;
+  }
+  return z.squaredNorm();
+}
+
+/// The k where the observed NIS sum, decreasing in k, equals the expected
+/// one: log-linear between grid points; `beyond` says when it is off the grid.
+template <std::size_t N>
+double solve_scale(const std::array<double, N>& at_scale, double expected, int& beyond) {
+  beyond = 0;
+  if (at_scale.front() < expected) {
+    beyond = -1;
+    return scale_at(0);
+  }
+  for (std::size_t g = 0; g + 1 < N; ++g) {
+    if (at_scale[g + 1] > expected) continue;
+    const double a = std::log(at_scale[g] / expected), b = std::log(at_scale[g + 1] / expected);
+    const double f = a > b ? a / (a - b) : 0.0;
+    return scale_at(static_cast<int>(g)) * std::pow(10.0, f / SensorHealth::kScaleSteps);
+  }
+  beyond = 1;
+  return scale_at(static_cast<int>(N) - 1);
+}
+
+}  // namespace
+
+std::optional<Pose6> robot_truth(const DataStep& data, int ground_truth_sensor, const std::vector<int>& dofs) {
+  if (ground_truth_sensor >= 0 || !data.ground_truth) return std::nullopt;
+  for (int i : dofs)
+    if (!(data.ground_truth_known & (1u << i))) return std::nullopt;
+  return data.ground_truth;
+}
+
+Eigen::VectorXd robot_error(const Pose6& truth, const Pose6& estimate, const std::vector<int>& dofs) {
+  const Pose6 e = pose_difference(truth, estimate);
+  Eigen::VectorXd out(static_cast<Eigen::Index>(dofs.size()));
+  for (std::size_t i = 0; i < dofs.size(); ++i) out[static_cast<Eigen::Index>(i)] = e[dofs[i]];
+  return out;
+}
 
 SensorHealth::SensorHealth(std::string sensor, std::string extractor_hint, std::int64_t silent_span, int nis_window,
                            double gate_probability)
@@ -92,6 +165,44 @@ void SensorHealth::record_update(double nis, int rows) {
   }
 }
 
+void SensorHealth::record_update(const UpdateInnovation& u) {
+  const auto m = u.eta.size();
+  if (m == 0) return;
+  const int k = u.robot_columns;
+  const auto n = u.J_state.cols();
+  const double expected = expected_nis(static_cast<int>(m));
+  KindSums& sums = kinds_[u.kind];
+  // S = A + R, A = J P Jᵀ (eq. 29).
+  const double nis = add_nis_on_grid(u.eta, u.J_state * u.P * u.J_state.transpose(), u.R, sums.filter.at_scale);
+  if (nis < 0.0) return;
+  record_update(nis, static_cast<int>(m));
+  NisSums& f = sums.filter;
+  ++f.updates;
+  f.rows += m;
+  f.nis += nis;
+  f.expected += expected;
+  if (u.robot_error.size() != k || k == 0) return;
+  // Given the robot's true pose: the robot's error e_r, and the part of the
+  // feature's error that the filter correlates with it, P_fr P_rr⁻¹ e_r, are
+  // taken out of η; what remains has S' = J_f (P_ff − P_fr P_rr⁻¹ P_rf) J_fᵀ + R
+  // (the Gaussian conditional of the feature's error on the robot's).
+  const Eigen::LDLT<Eigen::MatrixXd> P_rr(u.P.topLeftCorner(k, k));
+  if (P_rr.info() != Eigen::Success) return;
+  const Eigen::MatrixXd P_fr = u.P.bottomLeftCorner(n - k, k);
+  const Eigen::MatrixXd J_f = u.J_state.rightCols(n - k);
+  const Eigen::VectorXd eta =
+      u.eta + u.J_state.leftCols(k) * u.robot_error + J_f * (P_fr * P_rr.solve(u.robot_error));
+  const Eigen::MatrixXd P_f_given_r = u.P.bottomRightCorner(n - k, n - k) - P_fr * P_rr.solve(P_fr.transpose());
+  const Eigen::MatrixXd A = J_f * P_f_given_r * J_f.transpose();
+  NisSums& t = sums.true_pose;
+  const double nis_true = add_nis_on_grid(eta, A, u.R, t.at_scale);
+  if (nis_true < 0.0) return;
+  ++t.updates;
+  t.rows += m;
+  t.nis += nis_true;
+  t.expected += expected;
+}
+
 std::vector<std::string> SensorHealth::take_new_warnings() { return std::exchange(new_warnings_, {}); }
 
 std::vector<std::string> SensorHealth::take_new_notes() { return std::exchange(new_notes_, {}); }
@@ -102,6 +213,24 @@ SensorHealthReport SensorHealth::report() const {
     out.nis_ratio = nis_sum_ / expected_sum_;
     out.mean_nis_per_row = nis_sum_ / rows_sum_;
     out.expected_nis_per_row = expected_sum_ / rows_sum_;
+  }
+  for (const auto& [kind, sums] : kinds_) {
+    if (sums.filter.updates == 0) continue;
+    KindNisReport r;
+    r.kind = kind;
+    r.updates = sums.filter.updates;
+    r.rows = sums.filter.rows;
+    r.mean_nis = sums.filter.nis / static_cast<double>(r.updates);
+    r.expected_nis = sums.filter.expected / static_cast<double>(r.updates);
+    r.nis_ratio = sums.filter.nis / sums.filter.expected;
+    r.sigma_scale = solve_scale(sums.filter.at_scale, sums.filter.expected, r.sigma_scale_beyond);
+    const NisSums& t = sums.true_pose;
+    r.true_pose_updates = t.updates;
+    if (t.updates > 0) {
+      r.nis_ratio_true_pose = t.nis / t.expected;
+      r.sigma_scale_true_pose = solve_scale(t.at_scale, t.expected, r.sigma_scale_true_pose_beyond);
+    }
+    out.kinds.push_back(std::move(r));
   }
   return out;
 }

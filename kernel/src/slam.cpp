@@ -205,6 +205,7 @@ bool Slam::step() {
 
   t0 = Clock::now();
   predict(data);
+  robot_truth_ = robot_truth(data, ground_truth_sensor_, dofs_);
   if (problem_ && !data.readings.empty()) problem_->key_pose(trajectory_.size());
   stats_.seconds_predict += seconds_since(t0);
 
@@ -397,9 +398,16 @@ void Slam::record_health(int sensor_index, const ReadingWork& w, double extract_
   SensorHealth& health = health_[static_cast<std::size_t>(sensor_index)];
   health.record_reading(static_cast<std::int64_t>(w.measurements.size()), static_cast<std::int64_t>(w.matches.size()),
                         extract_seconds);
-  for (const Match& match : w.matches)
-    if (features_[match.feature].feature->mspace_dim() > 0)
-      health.record_update(match.candidate.d2, static_cast<int>(match.candidate.innovation.eta.size()));
+  for (const Match& match : w.matches) {
+    const MapFeature& f = features_[match.feature];
+    if (f.feature->mspace_dim() == 0) continue;
+    std::vector<int> idx = robot_idx_;
+    idx.insert(idx.end(), f.state_idx.begin(), f.state_idx.end());
+    const Candidate& c = match.candidate;
+    health.record_update({w.measurements[match.measurement].kind, c.innovation.eta, c.J_state,
+                          estimator_->marginal(idx), c.C_eta, static_cast<int>(robot_idx_.size()),
+                          robot_truth_ ? robot_error(*robot_truth_, x_r_, dofs_) : Eigen::VectorXd()});
+  }
   for (const std::string& warning : health.take_new_warnings()) log_->warn("step ", step_, ": ", warning);
   for (const std::string& note : health.take_new_notes()) log_->info("step ", step_, ": ", note);
 }

@@ -233,6 +233,9 @@ class Slam {
   std::vector<StampedPose> ground_truth_;
   std::vector<StampedPose> evaluated_;
   int ground_truth_sensor_ = -1;
+  /// The robot's true pose at this step, when the ground truth gives all of
+  /// its estimated coordinates (for the noise statistics of sensor_health.hpp).
+  std::optional<Pose6> robot_truth_;
   RunStats stats_;
   std::vector<double> record_path_;  ///< path distance of every trajectory record
   double last_loop_attempt_path_ = -1e300;

@@ -3,6 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
 #include <numbers>
 #include <optional>
 #include <opencv2/imgproc.hpp>
@@ -230,6 +233,7 @@ struct CeilingLineExtractor::Cache {
   cv::Mat edges;              ///< Canny edges of the distorted image
   EdgePoints points;          ///< the edge points, undistorted
   std::vector<cv::Vec4i> hough;
+  std::vector<int> magnitude_histogram, derivative_histogram;  ///< relative thresholds
 
   void prepare(const camera::CameraModel& cam) {
     const Eigen::RowVectorXd row = camera::reading_row(cam);
@@ -254,12 +258,53 @@ struct CeilingLineExtractor::Cache {
   }
 
   /// Canny edges of the (distorted) image, located to sub-pixel accuracy and
-  /// undistorted into `points`.
-  void find_edge_points(const cv::Mat& grey, const LineConfig& c) {
+  /// undistorted into `points`; the thresholds used go to `stats`.
+  void find_edge_points(const cv::Mat& grey, const LineConfig& c, CeilingLineExtractor::ImageStatistics& stats) {
     cv::Sobel(grey, dx, CV_16S, 1, 0, 3);
     cv::Sobel(grey, dy, CV_16S, 0, 1, 3);
-    cv::Canny(dx, dy, edges, c.canny_low, c.canny_high);
+    double scale = 1.0;
+    if (c.mode == ThresholdMode::Relative) {
+      measure_gradients(stats);
+      // The header's s = min(1, E / reference_edge), kept above the noise floor.
+      const double floor = c.min_threshold_sigma * stats.noise_sigma / c.canny_high;
+      scale = std::min(1.0, std::max(stats.edge_contrast / c.reference_edge, floor));
+    }
+    stats.canny_low = scale * c.canny_low;
+    stats.canny_high = scale * c.canny_high;
+    cv::Canny(dx, dy, edges, stats.canny_low, stats.canny_high);
     undistort_edges();
+  }
+
+  /// The image's edge contrast E (99.9th percentile of |dx| + |dy|, Canny's
+  /// magnitude) and the σ of the Sobel derivative's noise (1.4826 · median
+  /// |dx|), both read off histograms: O(pixels), no sorting.
+  void measure_gradients(CeilingLineExtractor::ImageStatistics& stats) {
+    constexpr int kMaxMagnitude = 2 * 4 * 255;  // |dx| + |dy| of the 3×3 Sobel on 8-bit grey
+    magnitude_histogram.assign(kMaxMagnitude + 1, 0);
+    derivative_histogram.assign(kMaxMagnitude / 2 + 1, 0);
+    for (int v = 1; v + 1 < dx.rows; ++v) {
+      const std::int16_t* gx = dx.ptr<std::int16_t>(v);
+      const std::int16_t* gy = dy.ptr<std::int16_t>(v);
+      for (int u = 1; u + 1 < dx.cols; ++u) {
+        ++magnitude_histogram[static_cast<std::size_t>(std::abs(gx[u]) + std::abs(gy[u]))];
+        ++derivative_histogram[static_cast<std::size_t>(std::abs(gx[u]))];
+      }
+    }
+    stats.edge_contrast = quantile(magnitude_histogram, 0.999);
+    stats.noise_sigma = 1.4826 * quantile(derivative_histogram, 0.5);
+  }
+
+  /// The value below which the fraction q of a histogram's counts lie (its
+  /// bins are the integer values).
+  static double quantile(const std::vector<int>& histogram, double q) {
+    std::int64_t total = 0;
+    for (int count : histogram) total += count;
+    std::int64_t seen = 0;
+    for (std::size_t b = 0; b < histogram.size(); ++b) {
+      seen += histogram[b];
+      if (static_cast<double>(seen) >= q * static_cast<double>(total)) return static_cast<double>(b);
+    }
+    return static_cast<double>(histogram.size() - 1);
   }
 
   /// Hough segments of the undistorted edge points, each refitted to them.
@@ -328,8 +373,17 @@ struct CeilingLineExtractor::Cache {
 std::vector<ParamSpec> CeilingLineExtractor::param_specs() {
   const LineConfig d;
   return {
-      param_double("canny_low", d.canny_low, "Canny lower hysteresis threshold", 0.0),
-      param_double("canny_high", d.canny_high, "Canny upper hysteresis threshold", 0.0),
+      param_string("threshold_mode", "relative",
+                   "relative: canny_low/high scaled down by the image's edge contrast (survives darker exposure "
+                   "and blur); absolute: canny_low/high as they are"),
+      param_double("canny_low", d.canny_low, "Canny lower hysteresis threshold (Sobel |dx|+|dy|)", 0.0),
+      param_double("canny_high", d.canny_high, "Canny upper hysteresis threshold (Sobel |dx|+|dy|)", 0.0),
+      param_double("reference_edge", d.reference_edge,
+                   "relative mode: edge contrast (99.9th percentile of the gradient magnitude) of a well-exposed "
+                   "sharp image, at which canny_low/high apply unscaled",
+                   1.0),
+      param_double("min_threshold_sigma", d.min_threshold_sigma,
+                   "relative mode: canny_high is kept at least this many sigmas of the image's Sobel noise", 0.0),
       param_int("hough_threshold", d.hough_threshold, "Hough accumulator votes for a line", 1),
       param_double("hough_theta_deg", d.hough_theta / kDegree,
                    "Hough angle resolution (deg); segments are refitted afterwards", 0.1, 10.0),
@@ -354,7 +408,15 @@ CeilingLineExtractor::CeilingLineExtractor(const PluginArgs& args)
     : CeilingLineExtractor([&] {
         const Params& p = args.params;
         LineConfig c;
+        const std::string mode = p.get_string("threshold_mode");
+        if (mode == "relative") c.mode = ThresholdMode::Relative;
+        else if (mode == "absolute") c.mode = ThresholdMode::Absolute;
+        else
+          throw std::invalid_argument("ceiling_lines: threshold_mode must be 'relative' or 'absolute', not '" +
+                                      mode + "'");
         c.canny_low = p.get_double("canny_low");
+        c.reference_edge = p.get_double("reference_edge");
+        c.min_threshold_sigma = p.get_double("min_threshold_sigma");
         c.canny_high = p.get_double("canny_high");
         c.hough_threshold = static_cast<int>(p.get_int("hough_threshold"));
         c.hough_theta = p.get_double("hough_theta_deg") * kDegree;
@@ -382,7 +444,7 @@ void CeilingLineExtractor::extract_image(const camera::GreyView& image,
                                          std::vector<Measurement>& out) {
   Cache& k = *cache_;
   k.prepare(cam);
-  k.find_edge_points(camera::as_mat(image), config_);
+  k.find_edge_points(camera::as_mat(image), config_, stats_);
   std::vector<Segment> lines = merge_collinear(k.refined_hough_segments(config_), config_);
   for (Segment& line : lines) {  // a merged segment is refitted over its whole extent
     if (!line.merged) continue;

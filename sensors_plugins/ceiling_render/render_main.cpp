@@ -18,6 +18,8 @@ int main(int argc, char** argv) {
   app.add_option("--seed", settings.seed, "random seed (world jitter, odometry and pixel noise)");
   app.add_option("--frames", settings.max_frames, "stop after this many frames (0: whole route)");
   app.add_option("--speed", settings.speed, "robot speed (m/s)")->check(CLI::PositiveNumber);
+  bool no_laser = false;
+  app.add_flag("--no-laser", no_laser, "no planar laser scans (laser.yaml, laser.csv): camera-only runs");
   app.add_option("--heading-drift", settings.heading_drift_deg_per_m,
                  "systematic odometry heading drift (deg per m)");
   app.add_option("--noise", settings.render.noise_sigma, "pixel noise std (grey levels)")
@@ -42,6 +44,7 @@ int main(int argc, char** argv) {
                  "multiplies the default lens distortion coefficients (0: a pinhole camera)")
       ->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
+  settings.laser.enabled = !no_laser;
   for (double& k : settings.render.camera.distortion) k *= distortion_scale;
   try {
     const auto summary = mspace::ceiling_render::write_sequence(settings, out);

@@ -91,6 +91,12 @@ inline std::vector<RenderVariant> render_variants() {
   add("noisy sensor (sigma 6)", [](RenderVariant& r) { r.noise = 6.0; });
   add("vignetting 0.4", [](RenderVariant& r) { r.vignetting = 0.4; });
   add("blurred (sigma 1.5 px)", [](RenderVariant& r) { r.blur = 1.5; });
+  // Both at once: every gradient about half the default's (ceiling_lines'
+  // relative thresholds are for this; the absolute ones lose room B's lines).
+  add("dark and blurred (gain 0.6, blur 1.2)", [](RenderVariant& r) {
+    r.gain = 0.6;
+    r.blur = 1.2;
+  });
   add("dim small lamps (235, r 0.065 m)", [](RenderVariant& r) {
     r.lamp_grey = 235.0;
     r.lamp_radius = 0.065;
