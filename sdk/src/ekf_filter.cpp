@@ -151,6 +151,39 @@ void EkfFilter::reserve(int rows) {
   store_.swap(bigger);
 }
 
+void EkfFilter::save_state(StateWriter& out) const {
+  Eigen::MatrixXd dims(1, 3);
+  dims << k_, n_, constrained_ ? 1.0 : 0.0;
+  out.put("dims", dims);
+  estimator_support::save_capacity(out, "store", store_);
+  out.put("covariance", estimator_support::lower_block(store_, n_));
+  if (constrained_) U_.save(out, "unobservable_");
+}
+
+void EkfFilter::restore_state(const StateReader& in, int version) {
+  const std::string context = "ekf restore_state";
+  if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
+  const Eigen::MatrixXd& dims = get_state(in, "dims", 1, 3, context);
+  const int k = static_cast<int>(dims(0, 0)), n = static_cast<int>(dims(0, 1));
+  if (k < 1 || n < k || dims(0, 0) != k || dims(0, 1) != n)
+    throw std::invalid_argument(context + ": saved dimensions are not 1 <= k <= n");
+  if ((dims(0, 2) != 0.0) != constrained_)
+    throw std::invalid_argument(context + ": saved with observability_constrained " +
+                                (dims(0, 2) != 0.0 ? "true" : "false") + ", this instance has the other setting");
+  const Eigen::MatrixXd& C = get_state(in, "covariance", n, n, context);
+  estimator_support::require_finite(C, context, "covariance");
+  Eigen::MatrixXd store = estimator_support::restore_capacity(in, "store", n, n, context);
+  if (store.rows() != store.cols()) throw std::invalid_argument(context + ": saved store is not square");
+  estimator_support::UnobservableDirections U;
+  if (constrained_) U.restore(in, "unobservable_", n, context);
+  // Nothing above changed the filter: now take it all.
+  store.topLeftCorner(n, n).triangularView<Eigen::Lower>() = C;
+  store_.swap(store);
+  k_ = k;
+  n_ = n;
+  U_ = std::move(U);
+}
+
 Eigen::MatrixXd EkfFilter::covariance() const {
   return store_.topLeftCorner(n_, n_).selfadjointView<Eigen::Lower>();
 }

@@ -16,8 +16,10 @@
 // map files; Estimator::wants_problem and relinearize, mspace/problem.hpp,
 // EkfFilter in the SDK library; DataStep::odometry_covariance;
 // FeatureType::sample_observation, so that the conformance suite can drive
-// extensions that need a moving sensor).
-#define MSPACE_SDK_VERSION_MAJOR 3
+// extensions that need a moving sensor; 4: PluginObject::has_state,
+// state_version, save_state and restore_state with mspace/state.hpp, for
+// checkpoints).
+#define MSPACE_SDK_VERSION_MAJOR 4
 #define MSPACE_SDK_VERSION_MINOR 0
 
 #define MSPACE_ABI_STR2(x) #x
