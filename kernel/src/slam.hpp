@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <optional>
@@ -36,6 +37,7 @@
 namespace mspace::kernel {
 
 class Problem;
+struct StoredMap;
 
 /// One feature in the map, as the kernel tracks it.
 struct MapFeature {
@@ -116,6 +118,25 @@ class Slam {
   /// Reads and processes the next data step; false at the end of the data or
   /// after run.max_steps steps.
   bool step();
+  /// Data steps processed so far (restored ones included).
+  std::int64_t steps_done() const { return step_; }
+
+  // ---- Checkpoints (checkpoint.cpp, docs/persistence.md §4) -----------------
+  /// Throws a PluginError when the run cannot be checkpointed: an estimator
+  /// that does not save its state (or that re-linearises: the kernel's
+  /// nonlinear problem is not saved yet).
+  void require_checkpointable() const;
+  /// The whole state of the run: the map (every feature through its plugin's
+  /// save()), the kernel's bookkeeping, every plugin object's run-time state
+  /// and the resolved configuration. `file` is only for error messages.
+  StoredMap snapshot_checkpoint(const std::filesystem::path& file) const;
+  /// Continues from `checkpoint` (read from `file`): only on a Slam freshly
+  /// made from the checkpoint's configuration, before any step(). The data
+  /// source restores its position, or is replayed up to the checkpoint's step
+  /// when it has no state. Throws PersistenceError naming the file (and the
+  /// feature or plugin) on any mismatch; the caller then drops this Slam, so
+  /// nothing half-loaded survives.
+  void restore_checkpoint(const StoredMap& checkpoint, const std::filesystem::path& file);
 
   const RunConfig& config() const { return config_; }
   const Pose6& pose() const { return x_r_; }
