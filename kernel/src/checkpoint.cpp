@@ -165,14 +165,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     mf.id = static_cast<int>(sf.id);
     mf.type = restored[i].type;
     mf.feature = std::move(restored[i].feature);
-    mf.state_idx = sf.state_idx;
-    mf.own_idx = sf.own_idx;
-    mf.shared = sf.shared;
-    mf.created_step = sf.created_step;
-    mf.last_seen_step = sf.last_seen_step;
-    mf.last_sensor = sf.last_sensor;
-    mf.last_seen_t = sf.last_seen_t;
-    mf.times_matched = sf.times_matched;
+    static_cast<FeatureBookkeeping&>(mf) = sf;
     if (mf.last_sensor < 0 || mf.last_sensor >= static_cast<int>(sensors_.size()))
       throw PersistenceError(file, "its last sensor " + std::to_string(mf.last_sensor) + " is not in the run", sf.id,
                              types_[static_cast<std::size_t>(mf.type)].plugin);

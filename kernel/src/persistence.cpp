@@ -647,14 +647,7 @@ StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file) {
     StoredFeature f;
     f.id = mf.id;
     f.type = mf.type;
-    f.state_idx = mf.state_idx;
-    f.own_idx = mf.own_idx;
-    f.shared = mf.shared;
-    f.created_step = mf.created_step;
-    f.last_seen_step = mf.last_seen_step;
-    f.last_sensor = mf.last_sensor;
-    f.last_seen_t = mf.last_seen_t;
-    f.times_matched = mf.times_matched;
+    static_cast<FeatureBookkeeping&>(f) = mf;
     const FeatureTypeSlot& type = slam.feature_types()[static_cast<std::size_t>(mf.type)];
     try {
       f.saved = mf.feature->save();

@@ -39,6 +39,7 @@
 #include <utility>
 #include <vector>
 
+#include "feature_bookkeeping.hpp"
 #include "mspace/coords.hpp"
 #include "mspace/feature.hpp"
 #include "mspace/pose.hpp"
@@ -78,17 +79,9 @@ struct StoredType {
 
 /// One feature: the kernel's bookkeeping (as in MapFeature) and the state the
 /// plugin's save() returned.
-struct StoredFeature {
+struct StoredFeature : FeatureBookkeeping {
   std::int64_t id = 0;
   int type = 0;  ///< index into StoredMap::types
-  std::vector<int> state_idx;
-  std::vector<int> own_idx;
-  std::map<int, int> shared;  ///< coordinate block → shared coordinate id
-  std::int64_t created_step = 0;
-  std::int64_t last_seen_step = 0;
-  int last_sensor = 0;
-  double last_seen_t = 0.0;
-  int times_matched = 0;
   SavedFeature saved;
 };
 

@@ -26,6 +26,7 @@
 #include "association.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"
+#include "feature_bookkeeping.hpp"
 #include "mspace/estimator.hpp"
 #include "mspace/extractor.hpp"
 #include "mspace/feature.hpp"
@@ -39,21 +40,12 @@ namespace mspace::kernel {
 class Problem;
 struct StoredMap;
 
-/// One feature in the map, as the kernel tracks it.
-struct MapFeature {
+/// One feature in the map, as the kernel tracks it: the plugin's feature and
+/// the kernel's bookkeeping (estimator rows, shared blocks, history).
+struct MapFeature : FeatureBookkeeping {
   int id = 0;
   int type = 0;                      ///< index into Slam::feature_types()
   std::shared_ptr<Feature> feature;  ///< keeps its plugin library loaded
-  /// Estimator indices of its M-space columns, in the feature's column order:
-  /// own_idx, then the shared blocks' indices in ascending block order.
-  std::vector<int> state_idx;
-  std::vector<int> own_idx;        ///< indices of the feature's own dimensions
-  std::map<int, int> shared;       ///< coordinate block → SharedCoordinate id
-  std::int64_t created_step = 0;
-  std::int64_t last_seen_step = 0;
-  int last_sensor = 0;      ///< sensor of the newest evidence
-  double last_seen_t = 0.0;  ///< time stamp of the newest evidence
-  int times_matched = 0;
 };
 
 /// A coordinate block common to several features (T-RO §VI), e.g. the corner
