@@ -500,11 +500,11 @@ void CekfFilter::save_state(StateWriter& out) const {
   support::save_capacity(out, "psi", psi_);
   support::save_capacity(out, "gt", gt_);
   support::save_capacity(out, "p0", p0_);
-  out.put("paa", support::lower_block(paa_, na_));
+  out.put("paa", support::pack_lower(paa_, na_));
   out.put("phi", phi_.topLeftCorner(na_, n0_));
   out.put("psi", psi_.topLeftCorner(n0_, n0_));
   out.put("gt", gt_.topLeftCorner(ns_, n0_));
-  out.put("p0", support::lower_block(p0_, ns_));
+  out.put("p0", support::pack_lower(p0_, ns_));
   out.put("memo_entries", Eigen::MatrixXd::Constant(1, 1, static_cast<double>(memo_.size())));
   int i = 0;
   for (const auto& [slots, entry] : memo_) {
@@ -552,11 +552,15 @@ void CekfFilter::restore_state(const StateReader& in, int version) {
     store = support::restore_capacity(in, name, rows, cols, context);
     store.topLeftCorner(rows, cols) = m;
   };
-  take("paa", f.paa_, na, na);
+  const auto take_lower = [&](const char* name, Eigen::MatrixXd& store, Index n) {
+    store = support::restore_capacity(in, name, n, n, context);
+    support::unpack_lower(in.get(name), n, store, context + ": " + name);
+  };
+  take_lower("paa", f.paa_, na);
   take("phi", f.phi_, na, n0);
   take("psi", f.psi_, n0, n0);
   take("gt", f.gt_, ns, n0);
-  take("p0", f.p0_, ns, ns);
+  take_lower("p0", f.p0_, ns);
   const Eigen::MatrixXd& entries = get_state(in, "memo_entries", 1, 1, context);
   if (!(entries(0, 0) >= 0 && entries(0, 0) <= 1e9)) throw std::invalid_argument(context + ": bad memo size");
   for (int i = 0; i < static_cast<int>(entries(0, 0)); ++i) {

@@ -156,7 +156,7 @@ void EkfFilter::save_state(StateWriter& out) const {
   dims << k_, n_, constrained_ ? 1.0 : 0.0;
   out.put("dims", dims);
   estimator_support::save_capacity(out, "store", store_);
-  out.put("covariance", estimator_support::lower_block(store_, n_));
+  out.put("covariance", estimator_support::pack_lower(store_, n_));
   if (constrained_) U_.save(out, "unobservable_");
 }
 
@@ -170,14 +170,12 @@ void EkfFilter::restore_state(const StateReader& in, int version) {
   if ((dims(0, 2) != 0.0) != constrained_)
     throw std::invalid_argument(context + ": saved with observability_constrained " +
                                 (dims(0, 2) != 0.0 ? "true" : "false") + ", this instance has the other setting");
-  const Eigen::MatrixXd& C = get_state(in, "covariance", n, n, context);
-  estimator_support::require_finite(C, context, "covariance");
   Eigen::MatrixXd store = estimator_support::restore_capacity(in, "store", n, n, context);
   if (store.rows() != store.cols()) throw std::invalid_argument(context + ": saved store is not square");
+  estimator_support::unpack_lower(in.get("covariance"), n, store, context);
   estimator_support::UnobservableDirections U;
   if (constrained_) U.restore(in, "unobservable_", n, context);
   // Nothing above changed the filter: now take it all.
-  store.topLeftCorner(n, n).triangularView<Eigen::Lower>() = C;
   store_.swap(store);
   k_ = k;
   n_ = n;

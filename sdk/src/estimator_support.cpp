@@ -131,10 +131,24 @@ void UnobservableDirections::restore(const StateReader& in, const std::string& p
   U_ = U;
 }
 
-Eigen::MatrixXd lower_block(const Eigen::MatrixXd& store, Index n) {
-  Eigen::MatrixXd m = Eigen::MatrixXd::Zero(n, n);
-  m.triangularView<Eigen::Lower>() = store.topLeftCorner(n, n);
-  return m;
+Eigen::MatrixXd pack_lower(const Eigen::MatrixXd& store, Index n) {
+  Eigen::MatrixXd packed(n * (n + 1) / 2, 1);
+  Index at = 0;
+  for (Index c = 0; c < n; ++c) {
+    packed.col(0).segment(at, n - c) = store.col(c).segment(c, n - c);
+    at += n - c;
+  }
+  return packed;
+}
+
+void unpack_lower(const Eigen::MatrixXd& packed, Index n, Eigen::MatrixXd& store, const std::string& context) {
+  require_size(packed, n * (n + 1) / 2, 1, context, "packed lower triangle");
+  require_finite(packed, context, "packed lower triangle");
+  Index at = 0;
+  for (Index c = 0; c < n; ++c) {
+    store.col(c).segment(c, n - c) = packed.col(0).segment(at, n - c);
+    at += n - c;
+  }
 }
 
 void save_capacity(StateWriter& out, const std::string& name, const Eigen::MatrixXd& store) {

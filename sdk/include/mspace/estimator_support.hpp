@@ -89,9 +89,14 @@ class UnobservableDirections {
 };
 
 /// Checkpoints of a symmetric matrix kept as the lower triangle of a larger
-/// store (ekf, cekf): the top-left n × n block of `store` with its strict
-/// upper triangle zero (the store's is never written, so it is not saved).
-Eigen::MatrixXd lower_block(const Eigen::MatrixXd& store, Eigen::Index n);
+/// store (ekf, cekf): the lower triangle of the top-left n × n block of
+/// `store`, column by column, as one column of n(n+1)/2 numbers (half the
+/// size of the square; the store's upper triangle is never written).
+Eigen::MatrixXd pack_lower(const Eigen::MatrixXd& store, Eigen::Index n);
+/// Writes what pack_lower() gave into the lower triangle of the top-left
+/// n × n block of `store`; std::invalid_argument (naming `context`) when
+/// `packed` is not n(n+1)/2 × 1 or not finite.
+void unpack_lower(const Eigen::MatrixXd& packed, Eigen::Index n, Eigen::MatrixXd& store, const std::string& context);
 
 /// The saved shape of a store: "<name>_capacity" (rows, cols). Restoring the
 /// same capacity keeps every later operation on the same memory layout, so a
