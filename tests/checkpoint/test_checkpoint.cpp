@@ -9,6 +9,7 @@
 #include <sys/wait.h>
 
 #include <algorithm>
+#include <csignal>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -314,6 +315,53 @@ TEST(Checkpoint, CommandLineResumeEqualsUninterruptedRun) {
   EXPECT_NE(read_text(dir / "both.log").find("--resume takes the configuration from the checkpoint"),
             std::string::npos)
       << read_text(dir / "both.log");
+}
+
+// A run stopped by a signal (as Ctrl-C does) writes a checkpoint where it
+// stopped, even between multiples of checkpoint_every, and the resumed run
+// equals the uninterrupted one.
+TEST(Checkpoint, InterruptedRunCheckpointsWhereItStopped) {
+  set_log_level(LogLevel::Warn);
+  const fs::path dir = scratch("signal");
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  const auto config_for = [&](const fs::path& out, std::int64_t max_steps) {
+    RunConfig config = load_config(config_file("sim_points.yaml"), registry);
+    config.output.dir = out.string();
+    config.output.picture = false;
+    config.max_steps = max_steps;
+    return config;
+  };
+  std::vector<StampedPose> reference;
+  {
+    Slam slam(config_for(dir / "whole", 600), registry);
+    run_to_end(slam, quiet());
+    reference = slam.trajectory();
+  }
+  {
+    RunConfig config = config_for(dir / "stopped", 600);
+    config.checkpoint_every = 1000;  // never reached: only the interruption writes one
+    Slam slam(config, registry);
+    RunOptions options = quiet();
+    options.stop_on_signals = true;
+    options.after_step = [](std::size_t done) {
+      if (done == 237) std::raise(SIGINT);
+    };
+    const RunResult result = run_to_end(slam, options);
+    EXPECT_EQ(result.stop_signal, SIGINT);
+    EXPECT_EQ(result.checkpoints, 1);
+  }
+  std::unique_ptr<Slam> slam = resume_from_checkpoint(dir / "stopped", registry, [&](RunConfig& c) {
+    c.output.dir = (dir / "resumed").string();
+  });
+  EXPECT_EQ(slam->steps_done(), 237);
+  run_to_end(*slam, quiet());
+  ASSERT_EQ(slam->trajectory().size(), reference.size());
+  for (std::size_t i = 0; i < reference.size(); ++i)
+    ASSERT_TRUE(slam->trajectory()[i].pose == reference[i].pose) << "pose " << i;
+  const FileComparison c = compare_files(dir / "whole" / "map.yaml", dir / "resumed" / "map.yaml");
+  EXPECT_TRUE(c.mismatch.empty()) << c.mismatch;
+  EXPECT_EQ(c.max_difference, 0.0);
 }
 
 // ---------------------------------------------------------------- refusals
