@@ -1,6 +1,7 @@
 // checkpoint.cpp — see checkpoint.hpp and docs/persistence.md §4.
 #include "checkpoint.hpp"
 
+#include <cmath>
 #include <string>
 #include <utility>
 #include <vector>
@@ -40,6 +41,15 @@ std::vector<StampedPose> poses_from(const StateReader& in, const std::string& na
     poses[i].known = static_cast<std::uint8_t>(m(7, c));
   }
   return poses;
+}
+
+/// Entry (0, i) of `m`, which must be an integer in [lo, hi] (a count, an id, a step).
+std::int64_t integer_at(const Eigen::MatrixXd& m, Eigen::Index i, double lo, double hi, const char* what) {
+  const double v = m(0, i);
+  if (!(v >= lo && v <= hi) || v != std::floor(v))
+    throw std::invalid_argument(std::string("run state: ") + what + " (" + std::to_string(v) +
+                                ") is not an integer in range");
+  return static_cast<std::int64_t>(v);
 }
 
 Eigen::MatrixXd row_of(std::initializer_list<double> values) {
@@ -217,12 +227,15 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
   const StoredState& run = c.run;
   std::int64_t step = 0;
   try {
-    step = static_cast<std::int64_t>(get_state(run, "step", 1, 1, "run state")(0, 0));
+    step = integer_at(get_state(run, "step", 1, 1, "run state"), 0, 0, 1e15, "step");
     const Eigen::MatrixXd& time = get_state(run, "time", 1, 4, "run state");
     const Eigen::MatrixXd& ids = get_state(run, "ids", 1, 2, "run state");
+    const std::int64_t next_feature_id = integer_at(ids, 0, 1, 2e9, "next feature id");
+    const std::int64_t next_shared_id = integer_at(ids, 1, 1, 2e9, "next shared id");
     const std::vector<int> dofs = get_ints<int>(run, "dofs", 0, 5, "run state");
     if (dofs != dofs_) throw std::invalid_argument("the robot's estimated coordinates differ from the motion model's");
-    const auto estimator_dim = static_cast<int>(get_state(run, "estimator_dim", 1, 1, "run state")(0, 0));
+    const auto estimator_dim =
+        static_cast<int>(integer_at(get_state(run, "estimator_dim", 1, 1, "run state"), 0, 1, 1e8, "estimator_dim"));
     if (estimator_->dim() != estimator_dim)
       throw std::invalid_argument("the estimator has " + std::to_string(estimator_->dim()) +
                                   " state rows after restore_state(), the run had " + std::to_string(estimator_dim));
@@ -241,16 +254,16 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     for (std::size_t i = 0; i < health_.size(); ++i) health_[i].restore(run, "health_" + std::to_string(i) + "_");
 
     RunStats s;
-    s.steps = static_cast<std::int64_t>(counters(0, 0));
-    s.readings = static_cast<std::int64_t>(counters(0, 1));
-    s.measurements = static_cast<std::int64_t>(counters(0, 2));
-    s.matched = static_cast<std::int64_t>(counters(0, 3));
-    s.updates = static_cast<std::int64_t>(counters(0, 4));
-    s.created = static_cast<std::int64_t>(counters(0, 5));
-    s.extended = static_cast<std::int64_t>(counters(0, 6));
-    s.joined = static_cast<std::int64_t>(counters(0, 7));
-    s.pruned = static_cast<std::int64_t>(counters(0, 8));
-    s.unknown_channel_readings = static_cast<std::int64_t>(counters(0, 9));
+    s.steps = integer_at(counters, 0, 0, 1e15, "steps");
+    s.readings = integer_at(counters, 1, 0, 1e15, "readings");
+    s.measurements = integer_at(counters, 2, 0, 1e15, "measurements");
+    s.matched = integer_at(counters, 3, 0, 1e15, "matched");
+    s.updates = integer_at(counters, 4, 0, 1e15, "updates");
+    s.created = integer_at(counters, 5, 0, 1e15, "created");
+    s.extended = integer_at(counters, 6, 0, 1e15, "extended");
+    s.joined = integer_at(counters, 7, 0, 1e15, "joined");
+    s.pruned = integer_at(counters, 8, 0, 1e15, "pruned");
+    s.unknown_channel_readings = integer_at(counters, 9, 0, 1e15, "readings without sensor");
     s.seconds_predict = seconds(0, 0);
     s.seconds_extract = seconds(0, 1);
     s.seconds_associate = seconds(0, 2);
@@ -259,12 +272,12 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     s.seconds_extend = seconds(0, 5);
     s.seconds_source = seconds(0, 6);
     s.nees.assign(nees.data(), nees.data() + nees.size());
-    s.nees_dof = static_cast<int>(get_state(run, "nees_dof", 1, 1, "run state")(0, 0));
+    s.nees_dof = static_cast<int>(integer_at(get_state(run, "nees_dof", 1, 1, "run state"), 0, 0, 6, "nees_dof"));
     AssociationStats a;
-    a.jcbb_readings = static_cast<std::int64_t>(association(0, 0));
-    a.jcbb_nodes = static_cast<std::int64_t>(association(0, 1));
-    a.jcbb_bounded = static_cast<std::int64_t>(association(0, 2));
-    a.index_queries = static_cast<std::int64_t>(association(0, 3));
+    a.jcbb_readings = integer_at(association, 0, 0, 1e15, "jcbb_readings");
+    a.jcbb_nodes = integer_at(association, 1, 0, 1e15, "jcbb_nodes");
+    a.jcbb_bounded = integer_at(association, 2, 0, 1e15, "jcbb_bounded");
+    a.index_queries = integer_at(association, 3, 0, 1e15, "index_queries");
 
     // Everything read: take it.
     features_ = std::move(features);
@@ -273,8 +286,8 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     started_ = time(0, 1) != 0.0;
     path_distance_ = time(0, 2);
     finished_ = time(0, 3) != 0.0;
-    next_feature_id_ = static_cast<int>(ids(0, 0));
-    next_shared_id_ = static_cast<int>(ids(0, 1));
+    next_feature_id_ = static_cast<int>(next_feature_id);
+    next_shared_id_ = static_cast<int>(next_shared_id);
     x_r_ = get_state(run, "robot_pose", 6, 1, "run state");
     stats_ = std::move(s);
     associator_.restore_stats(a);

@@ -1,5 +1,6 @@
 #include "sensor_health.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <utility>
 
@@ -135,6 +136,9 @@ void SensorHealth::restore(const StateReader& in, const std::string& prefix) {
   const Eigen::MatrixXd& counts = get_state(in, prefix + "counts", 1, 8, context);
   const Eigen::MatrixXd& sums = get_state(in, prefix + "sums", 1, 7, context);
   const Eigen::MatrixXd& flags = get_state(in, prefix + "flags", 1, 4, context);
+  for (Eigen::Index i = 0; i < counts.cols(); ++i)
+    if (!(std::abs(counts(0, i)) <= 1e15) || counts(0, i) != std::floor(counts(0, i)))
+      throw std::invalid_argument(context + ": saved count " + std::to_string(i) + " is not an integer");
   SensorHealthReport r = r_;
   r.readings = static_cast<std::int64_t>(counts(0, 0));
   r.measurements = static_cast<std::int64_t>(counts(0, 1));

@@ -521,7 +521,7 @@ void CekfFilter::restore_state(const StateReader& in, int version) {
   if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
   const Eigen::MatrixXd& dims = get_state(in, "dims", 1, 9, context);
   for (Index j = 0; j < 8; ++j)
-    if (!(dims(0, j) >= 0 && dims(0, j) < 1e15) || dims(0, j) != std::floor(dims(0, j)))
+    if (!(dims(0, j) >= 0 && dims(0, j) <= (j < 6 ? 1e8 : 1e15)) || dims(0, j) != std::floor(dims(0, j)))
       throw std::invalid_argument(context + ": saved dimension " + std::to_string(j) + " is not a count");
   const int k = static_cast<int>(dims(0, 0)), n = static_cast<int>(dims(0, 1)), na = static_cast<int>(dims(0, 2));
   const int n0 = static_cast<int>(dims(0, 3)), ns = static_cast<int>(dims(0, 4));

@@ -4,6 +4,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -164,9 +165,10 @@ void EkfFilter::restore_state(const StateReader& in, int version) {
   const std::string context = "ekf restore_state";
   if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
   const Eigen::MatrixXd& dims = get_state(in, "dims", 1, 3, context);
+  if (!(dims(0, 0) >= 1 && dims(0, 1) >= dims(0, 0) && dims(0, 1) <= 1e8) || dims(0, 0) != std::floor(dims(0, 0)) ||
+      dims(0, 1) != std::floor(dims(0, 1)))
+    throw std::invalid_argument(context + ": saved dimensions are not integers 1 <= k <= n");
   const int k = static_cast<int>(dims(0, 0)), n = static_cast<int>(dims(0, 1));
-  if (k < 1 || n < k || dims(0, 0) != k || dims(0, 1) != n)
-    throw std::invalid_argument(context + ": saved dimensions are not 1 <= k <= n");
   if ((dims(0, 2) != 0.0) != constrained_)
     throw std::invalid_argument(context + ": saved with observability_constrained " +
                                 (dims(0, 2) != 0.0 ? "true" : "false") + ", this instance has the other setting");
