@@ -191,6 +191,14 @@ class Associator {
                               const Eigen::MatrixXd& J_sr, const std::vector<Measurement>& meas);
 
   const AssociationStats& stats() const { return stats_; }
+  /// Checkpoints: the counters go on from the saved ones. Nothing else needs
+  /// saving: the χ² caches are recomputed alike and the spatial index is
+  /// rebuilt from the map (queries return features in ascending order, so the
+  /// result does not depend on the grid's history).
+  void restore_stats(const AssociationStats& stats) {
+    stats_ = stats;
+    dirty_ = true;
+  }
 
  private:
   /// Indices (ascending) of the features the sensor feeds within its range.

@@ -2,7 +2,8 @@
 //
 // Layout of a run file (every key is optional unless marked required):
 //
-//   run:          {name, log_level: info, max_steps: 0 (= all), plugin_path: [dirs], seed}
+//   run:          {name, log_level: info, max_steps: 0 (= all), checkpoint_every: 0 (steps; 0 = none),
+//                  plugin_path: [dirs], seed}
 //   source:       {plugin: <name>, <parameters>}                        # required
 //   motion:       {plugin: <name>, <parameters>}                        # required
 //   estimator:    {plugin: <name>, <parameters>}                        # required
@@ -155,6 +156,8 @@ struct RunConfig {
   std::string name;
   std::string log_level = "info";
   std::int64_t max_steps = 0;  ///< 0 = all
+  /// Write <output.dir>/checkpoint/ after every this many steps (0 = never).
+  std::int64_t checkpoint_every = 0;
   std::vector<std::string> plugin_path;
   std::optional<std::int64_t> seed;
   InstanceConfig source, motion, estimator;

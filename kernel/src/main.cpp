@@ -1,6 +1,7 @@
 // mspace — the command line tool.
 //
 //   mspace run [CONFIG] [--out DIR]   a SLAM run (the built-in simulated world without CONFIG)
+//   mspace run --resume DIR           continues a run from its checkpoint
 //   mspace plugins                    every plugin found, with kind, ABI tag and parameters
 //   mspace config [CONFIG]            the fully resolved configuration
 //   mspace check PLUGIN... [--junit F] the plugin conformance suite (files or names)
@@ -15,6 +16,7 @@
 #include <CLI/CLI.hpp>
 
 #include "check.hpp"
+#include "checkpoint.hpp"
 #include "config.hpp"
 #include "default_config.hpp"
 #include "logging.hpp"
@@ -51,17 +53,62 @@ RunConfig load(const std::string& file, PluginRegistry& registry) {
   return load_config(file, registry);
 }
 
-int cmd_run(const std::string& file, const std::string& out, long long max_steps, std::optional<long long> seed,
-            const std::string& estimator, bool quiet, const CommonOptions& common) {
+struct RunCommand {
+  std::string file, out, estimator, resume;
+  long long max_steps = 0;
+  std::optional<long long> seed, checkpoint_every;
+  bool quiet = false;
+};
+
+/// Runs `slam` to its end and prints the summary; the exit code.
+int run_and_report(Slam& slam, bool quiet) {
+  RunOptions options;
+  options.progress = !quiet;
+  options.stop_on_signals = true;
+  const RunResult result = run_to_end(slam, options);
+  std::cout << format_summary(result.summary, slam);
+  std::cout << "  outputs in " << result.output_dir.string() << "/ (";
+  for (std::size_t i = 0; i < result.files.size(); ++i) std::cout << (i > 0 ? ", " : "") << result.files[i];
+  std::cout << ")\n";
+  if (result.checkpoints > 0)
+    std::cout << "  " << result.checkpoints << " checkpoint(s) written, the last at "
+              << checkpoint_dir(slam.config()).string() << "/ (" << result.checkpoint_bytes
+              << " bytes); continue with: mspace run --resume " << checkpoint_dir(slam.config()).string() << "\n";
+  return result.stop_signal != 0 ? 128 + result.stop_signal : 0;  // 130 for SIGINT, 143 for SIGTERM
+}
+
+/// `mspace run --resume DIR`: the configuration is the checkpoint's; only the
+/// output folder, the step limit and the checkpoint interval may change.
+int cmd_resume(const RunCommand& c, const CommonOptions& common) {
+  if (!c.file.empty() || c.seed || !c.estimator.empty())
+    throw ConfigError("--resume takes the configuration from the checkpoint: give no CONFIG, --seed or --estimator "
+                      "(only --out, --max-steps, --checkpoint-every and --log-level)");
+  PluginRegistry registry;
+  setup_registry(registry, common);
+  std::unique_ptr<Slam> slam = resume_from_checkpoint(c.resume, registry, [&](RunConfig& config) {
+    set_log_level(parse_log_level(common.log_level.empty() ? config.log_level : common.log_level));
+    if (!c.out.empty()) config.output.dir = c.out;
+    if (c.max_steps > 0) config.max_steps = c.max_steps;
+    if (c.checkpoint_every) config.checkpoint_every = *c.checkpoint_every;
+  });
+  kernel_log().info("resumed ", find_checkpoint_file(c.resume).string(), " (run ", slam->config().name, " of ",
+                    slam->config().file.string(), ") at step ", slam->steps_done());
+  return run_and_report(*slam, c.quiet);
+}
+
+int cmd_run(const RunCommand& c, const CommonOptions& common) {
+  if (!c.resume.empty()) return cmd_resume(c, common);
+  const std::string& file = c.file;
   PluginRegistry registry;
   setup_registry(registry, common);
   RunConfig config = load(file, registry);
   for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
   set_log_level(parse_log_level(common.log_level.empty() ? config.log_level : common.log_level));
-  if (!out.empty()) config.output.dir = out;
-  if (max_steps > 0) config.max_steps = max_steps;
-  if (seed) config.seed = *seed;
-  if (!estimator.empty()) override_estimator(config, estimator, registry);
+  if (!c.out.empty()) config.output.dir = c.out;
+  if (c.max_steps > 0) config.max_steps = c.max_steps;
+  if (c.checkpoint_every) config.checkpoint_every = *c.checkpoint_every;
+  if (c.seed) config.seed = *c.seed;
+  if (!c.estimator.empty()) override_estimator(config, c.estimator, registry);
   apply_run_seed(config);
   // One line of what runs; the whole resolved configuration at debug level
   // (or with `mspace config`).
@@ -74,15 +121,7 @@ int cmd_run(const std::string& file, const std::string& out, long long max_steps
   kernel_log().debug("configuration ", file.empty() ? default_config_name() : file, ":\n",
                      effective_config_yaml(config));
   Slam slam(config, registry);
-  RunOptions options;
-  options.progress = !quiet;
-  options.stop_on_signals = true;
-  const RunResult result = run_to_end(slam, options);
-  std::cout << format_summary(result.summary, slam);
-  std::cout << "  outputs in " << result.output_dir.string() << "/ (";
-  for (std::size_t i = 0; i < result.files.size(); ++i) std::cout << (i > 0 ? ", " : "") << result.files[i];
-  std::cout << ")\n";
-  return result.stop_signal != 0 ? 128 + result.stop_signal : 0;  // 130 for SIGINT, 143 for SIGTERM
+  return run_and_report(slam, c.quiet);
 }
 
 int cmd_plugins(const CommonOptions& common) {
@@ -167,20 +206,23 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
 
   CommonOptions common;
-  std::string run_file, out_dir;
-  long long max_steps = 0;
-  bool quiet = false;
-  std::optional<long long> seed;
+  RunCommand run_cmd;
   CLI::App* run = app.add_subcommand("run", "run SLAM as a YAML file describes (the built-in simulated world without one)");
-  run->add_option("config", run_file, "YAML run configuration");
-  run->add_option("--out", out_dir, "output folder (overrides output.dir)");
-  run->add_option("--max-steps", max_steps, "stop after this many steps");
-  run->add_option("--seed", seed, "seed for every plugin with a `seed` parameter (overrides run.seed)");
-  std::string estimator;
-  run->add_option("--estimator", estimator,
+  run->add_option("config", run_cmd.file, "YAML run configuration");
+  run->add_option("--out", run_cmd.out, "output folder (overrides output.dir)");
+  run->add_option("--max-steps", run_cmd.max_steps, "stop after this many steps (counted from the start of the data)");
+  run->add_option("--seed", run_cmd.seed, "seed for every plugin with a `seed` parameter (overrides run.seed)");
+  run->add_option("--estimator", run_cmd.estimator,
                   "run this estimator plugin instead of the configuration's (e.g. ekf, cekf, smoother), with its "
                   "own default options");
-  run->add_flag("--quiet", quiet, "no progress output");
+  run->add_option("--checkpoint-every", run_cmd.checkpoint_every,
+                  "write <out>/checkpoint/ every N steps, replacing the previous one atomically (overrides "
+                  "run.checkpoint_every; 0 = none)")
+      ->check(CLI::NonNegativeNumber);
+  run->add_option("--resume", run_cmd.resume,
+                  "continue the run saved in this checkpoint (a checkpoint folder, or a run's output folder); the "
+                  "configuration is the checkpoint's");
+  run->add_flag("--quiet", run_cmd.quiet, "no progress output");
   add_common(run, common);
 
   CLI::App* plugins = app.add_subcommand("plugins", "list every plugin found with kind, ABI tag and parameters");
@@ -206,7 +248,7 @@ int main(int argc, char** argv) {
   }
   CLI11_PARSE(app, argc, argv);
   try {
-    if (run->parsed()) return cmd_run(run_file, out_dir, max_steps, seed, estimator, quiet, common);
+    if (run->parsed()) return cmd_run(run_cmd, common);
     if (plugins->parsed()) return cmd_plugins(common);
     if (config->parsed()) return cmd_config(config_file, common);
     if (check->parsed()) {

@@ -40,6 +40,10 @@ constexpr std::uint32_t kType = tag_of("TYPE");
 constexpr std::uint32_t kFeat = tag_of("FEAT");
 constexpr std::uint32_t kShrd = tag_of("SHRD");
 constexpr std::uint32_t kEnd = tag_of("END ");
+// Format version 2: the records of a checkpoint.
+constexpr std::uint32_t kParm = tag_of("PARM");
+constexpr std::uint32_t kRun = tag_of("RUN ");
+constexpr std::uint32_t kPsta = tag_of("PSTA");
 
 std::string tag_name(std::uint32_t tag) {
   std::string s;
@@ -241,6 +245,42 @@ std::string encode_shared(const StoredShared& c) {
   return e.bytes();
 }
 
+/// A named state: its arrays (name, matrix), then its byte strings (name, bytes).
+void encode_state(Encoder& e, const StoredState& state) {
+  e.u64(state.arrays().size());
+  for (const auto& [name, value] : state.arrays()) {
+    e.str(name);
+    e.matrix(value);
+  }
+  e.u64(state.bytes().size());
+  for (const auto& [name, bytes] : state.bytes()) {
+    e.str(name);
+    e.str(bytes);
+  }
+}
+
+std::string encode_parameters(const StoredCheckpoint& c) {
+  Encoder e;
+  e.str(c.config_file);
+  e.str(c.config_yaml);
+  return e.bytes();
+}
+
+std::string encode_run(const StoredCheckpoint& c) {
+  Encoder e;
+  encode_state(e, c.run);
+  return e.bytes();
+}
+
+std::string encode_plugin_state(const StoredPluginState& p) {
+  Encoder e;
+  e.str(p.instance);
+  e.str(p.plugin);
+  e.i32(p.version);
+  encode_state(e, p.state);
+  return e.bytes();
+}
+
 void decode_head(const std::string& payload, StoredMap& map) {
   Decoder d(payload);
   map.abi_tag = d.str();
@@ -306,6 +346,51 @@ StoredShared decode_shared(const std::string& payload) {
   }
   d.finish();
   return c;
+}
+
+void decode_state(Decoder& d, StoredState& state) {
+  const std::size_t arrays = d.count(24);
+  for (std::size_t i = 0; i < arrays; ++i) {
+    std::string name = d.str();
+    try {
+      state.put(name, d.matrix());
+    } catch (const std::logic_error&) {
+      throw std::runtime_error("the array '" + name + "' appears twice");
+    }
+  }
+  const std::size_t blobs = d.count(16);
+  for (std::size_t i = 0; i < blobs; ++i) {
+    std::string name = d.str();
+    try {
+      state.put_bytes(name, d.str());
+    } catch (const std::logic_error&) {
+      throw std::runtime_error("the byte string '" + name + "' appears twice");
+    }
+  }
+}
+
+void decode_parameters(const std::string& payload, StoredCheckpoint& c) {
+  Decoder d(payload);
+  c.config_file = d.str();
+  c.config_yaml = d.str();
+  d.finish();
+}
+
+void decode_run(const std::string& payload, StoredCheckpoint& c) {
+  Decoder d(payload);
+  decode_state(d, c.run);
+  d.finish();
+}
+
+StoredPluginState decode_plugin_state(const std::string& payload) {
+  Decoder d(payload);
+  StoredPluginState p;
+  p.instance = d.str();
+  p.plugin = d.str();
+  p.version = d.i32();
+  decode_state(d, p.state);
+  d.finish();
+  return p;
 }
 
 /// The SDK major version in an ABI tag "mspace-sdkN/…"; -1 if there is none.
@@ -511,6 +596,47 @@ PersistenceError::PersistenceError(const std::filesystem::path& file, const std:
       feature_id_(feature_id),
       plugin_(plugin) {}
 
+std::string pack_strings(const std::vector<std::string>& strings) {
+  Encoder e;
+  e.u64(strings.size());
+  for (const std::string& s : strings) e.str(s);
+  return e.bytes();
+}
+
+std::vector<std::string> unpack_strings(const std::string& bytes) {
+  try {
+    Decoder d(bytes);
+    std::vector<std::string> strings(d.count(8));
+    for (std::string& s : strings) s = d.str();
+    d.finish();
+    return strings;
+  } catch (const std::runtime_error& e) {
+    throw std::invalid_argument(std::string("not a list of strings: ") + e.what());
+  }
+}
+
+void StoredState::put(const std::string& name, const Eigen::MatrixXd& value) {
+  if (!arrays_.emplace(name, value).second) throw std::logic_error("saved array '" + name + "' written twice");
+}
+
+void StoredState::put_bytes(const std::string& name, const std::string& bytes) {
+  if (!bytes_.emplace(name, bytes).second) throw std::logic_error("saved byte string '" + name + "' written twice");
+}
+
+bool StoredState::has(const std::string& name) const { return arrays_.count(name) != 0 || bytes_.count(name) != 0; }
+
+const Eigen::MatrixXd& StoredState::get(const std::string& name) const {
+  const auto it = arrays_.find(name);
+  if (it == arrays_.end()) throw std::invalid_argument("no saved array '" + name + "'");
+  return it->second;
+}
+
+const std::string& StoredState::get_bytes(const std::string& name) const {
+  const auto it = bytes_.find(name);
+  if (it == bytes_.end()) throw std::invalid_argument("no saved byte string '" + name + "'");
+  return it->second;
+}
+
 StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file) {
   StoredMap map;
   map.abi_tag = sdk_abi_tag();
@@ -521,14 +647,7 @@ StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file) {
     StoredFeature f;
     f.id = mf.id;
     f.type = mf.type;
-    f.state_idx = mf.state_idx;
-    f.own_idx = mf.own_idx;
-    f.shared = mf.shared;
-    f.created_step = mf.created_step;
-    f.last_seen_step = mf.last_seen_step;
-    f.last_sensor = mf.last_sensor;
-    f.last_seen_t = mf.last_seen_t;
-    f.times_matched = mf.times_matched;
+    static_cast<FeatureBookkeeping&>(f) = mf;
     const FeatureTypeSlot& type = slam.feature_types()[static_cast<std::size_t>(mf.type)];
     try {
       f.saved = mf.feature->save();
@@ -543,6 +662,8 @@ StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file) {
 }
 
 void write_map_file(const std::filesystem::path& file, const StoredMap& map) {
+  if ((map.kind == "checkpoint") != map.checkpoint.has_value())
+    throw PersistenceError(file, "a checkpoint needs its checkpoint records, a map has none");
   if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
   AtomicFile out(file);
   out.write(kMagic.data(), kMagic.size());
@@ -554,13 +675,19 @@ void write_map_file(const std::filesystem::path& file, const StoredMap& map) {
   w.write(kType, 0, -1, encode_types(map));
   for (const StoredFeature& f : map.features) w.write(kFeat, f.id, f.type, encode_feature(f));
   for (const StoredShared& c : map.shared) w.write(kShrd, c.id, -1, encode_shared(c));
+  if (map.checkpoint) {
+    w.write(kParm, 0, -1, encode_parameters(*map.checkpoint));
+    w.write(kRun, 0, -1, encode_run(*map.checkpoint));
+    for (std::size_t i = 0; i < map.checkpoint->plugins.size(); ++i)
+      w.write(kPsta, static_cast<std::int64_t>(i), -1, encode_plugin_state(map.checkpoint->plugins[i]));
+  }
   Encoder end;
   end.put(w.records());
   w.write(kEnd, 0, -1, end.bytes());
   out.commit();
 }
 
-StoredMap read_map_file(const std::filesystem::path& file) {
+StoredMap read_map_file(const std::filesystem::path& file, const std::string& kind) {
   std::error_code ec;
   const std::uintmax_t size = std::filesystem::file_size(file, ec);
   if (ec) throw PersistenceError(file, "cannot read: " + ec.message());
@@ -574,11 +701,13 @@ StoredMap read_map_file(const std::filesystem::path& file) {
     throw PersistenceError(file, "truncated: the file ends before its format version");
   StoredMap map;
   map.format_version = Decoder(std::string(version_bytes.data(), 4)).get<std::uint32_t>();
-  if (map.format_version != kMapFormatVersion)
+  if (map.format_version < kOldestMapFormatVersion || map.format_version > kMapFormatVersion)
     throw PersistenceError(file, "format version " + std::to_string(map.format_version) +
-                                     "; this build of mspace reads version " + std::to_string(kMapFormatVersion));
+                                     "; this build of mspace reads versions " +
+                                     std::to_string(kOldestMapFormatVersion) + " to " +
+                                     std::to_string(kMapFormatVersion));
   RecordReader reader(file, in, static_cast<std::uint64_t>(size));
-  bool head = false, types = false;
+  bool head = false, types = false, parameters = false, run = false;
   for (;;) {
     const std::uint64_t index = reader.index();
     Record r = reader.next(map.types);
@@ -592,12 +721,21 @@ StoredMap read_map_file(const std::filesystem::path& file) {
         if (head) throw std::runtime_error("a second HEAD record");
         decode_head(r.payload, map);
         head = true;
+        if (map.kind != "map" && map.kind != "checkpoint")
+          throw std::runtime_error("unknown kind of file '" + map.kind + "'");
+        if (map.kind != kind)
+          throw PersistenceError(file, "this is a " + map.kind + ", not a " + kind +
+                                           (kind == "checkpoint" ? " (mspace run --resume needs a checkpoint)" : ""));
         const int major = sdk_major_of(map.abi_tag);
-        if (major != MSPACE_SDK_VERSION_MAJOR)
+        // SDK 4 changed no saved feature layout (it added plugin run-time
+        // state), so maps of SDK 3 still read; a checkpoint's plugin states
+        // follow the plugin interfaces of its own SDK version.
+        const int oldest = kind == "checkpoint" ? MSPACE_SDK_VERSION_MAJOR : 3;
+        if (major < oldest || major > MSPACE_SDK_VERSION_MAJOR)
           throw PersistenceError(file, "written with SDK ABI '" + map.abi_tag + "' (SDK version " +
                                            std::to_string(major) + "); this build has '" + sdk_abi_tag() +
-                                           "': the plugins' saved state may differ; re-create the map");
-        if (map.kind != "map") throw std::runtime_error("a '" + map.kind + "' file, not a map");
+                                           "': the plugins' saved state may differ; re-create the " + kind);
+        if (map.kind == "checkpoint") map.checkpoint.emplace();
       } else if (r.tag == kType) {
         if (types) throw std::runtime_error("a second TYPE record");
         decode_types(r.payload, map);
@@ -608,6 +746,21 @@ StoredMap read_map_file(const std::filesystem::path& file) {
         map.features.push_back(std::move(f));
       } else if (r.tag == kShrd) {
         map.shared.push_back(decode_shared(r.payload));
+      } else if ((r.tag == kParm || r.tag == kRun || r.tag == kPsta) && map.format_version >= 2) {
+        if (!map.checkpoint) throw std::runtime_error("a checkpoint record in a map");
+        if (r.tag == kParm) {
+          if (parameters) throw std::runtime_error("a second PARM record");
+          decode_parameters(r.payload, *map.checkpoint);
+          parameters = true;
+        } else if (r.tag == kRun) {
+          if (run) throw std::runtime_error("a second RUN record");
+          decode_run(r.payload, *map.checkpoint);
+          run = true;
+        } else {
+          if (r.key != static_cast<std::int64_t>(map.checkpoint->plugins.size()))
+            throw std::runtime_error("plugin state records out of order");
+          map.checkpoint->plugins.push_back(decode_plugin_state(r.payload));
+        }
       } else if (r.tag == kEnd) {
         std::uint64_t count = 0;
         {
@@ -632,6 +785,8 @@ StoredMap read_map_file(const std::filesystem::path& file) {
                              id, plugin);
     }
   }
+  if (map.checkpoint && (!parameters || !run))
+    throw PersistenceError(file, std::string("a checkpoint without its ") + (parameters ? "RUN" : "PARM") + " record");
   check_consistency(file, map);
   return map;
 }

@@ -15,6 +15,13 @@
 // plugins), FEAT (one per feature: the kernel's bookkeeping and the plugin's
 // SavedFeature with its named arrays), SHRD (one per shared coordinate), END.
 //
+// Format version 2 adds the records of a checkpoint (HEAD kind "checkpoint",
+// docs/persistence.md §4): PARM (the fully resolved configuration), RUN (the
+// kernel's own state: step, ids, robot pose, counters, trajectory so far) and
+// PSTA (one per plugin instance with run-time state: the estimator, a data
+// source's position and random generators, …; PluginObject::save_state).
+// Version 1 maps are still read.
+//
 // Every feature goes through its plugin: Feature::save() on the way out,
 // FeatureType::restore() on the way in. Reading checks the whole file before
 // anything is restored, and restore_features() returns all features or none.
@@ -32,17 +39,21 @@
 #include <utility>
 #include <vector>
 
+#include "feature_bookkeeping.hpp"
 #include "mspace/coords.hpp"
 #include "mspace/feature.hpp"
 #include "mspace/pose.hpp"
+#include "mspace/state.hpp"
 
 namespace mspace::kernel {
 
 class Slam;
 struct FeatureTypeSlot;
 
-/// The container format this build writes and reads.
-inline constexpr std::uint32_t kMapFormatVersion = 1;
+/// The container format this build writes; it reads this one and version 1.
+inline constexpr std::uint32_t kMapFormatVersion = 2;
+/// The oldest container format this build reads (a map without checkpoint records).
+inline constexpr std::uint32_t kOldestMapFormatVersion = 1;
 
 /// Why a map file cannot be written or read: names the file and, when one
 /// feature is concerned, its id and plugin.
@@ -68,17 +79,9 @@ struct StoredType {
 
 /// One feature: the kernel's bookkeeping (as in MapFeature) and the state the
 /// plugin's save() returned.
-struct StoredFeature {
+struct StoredFeature : FeatureBookkeeping {
   std::int64_t id = 0;
   int type = 0;  ///< index into StoredMap::types
-  std::vector<int> state_idx;
-  std::vector<int> own_idx;
-  std::map<int, int> shared;  ///< coordinate block → shared coordinate id
-  std::int64_t created_step = 0;
-  std::int64_t last_seen_step = 0;
-  int last_sensor = 0;
-  double last_seen_t = 0.0;
-  int times_matched = 0;
   SavedFeature saved;
 };
 
@@ -90,17 +93,59 @@ struct StoredShared {
   std::vector<std::pair<int, int>> members;  ///< (feature id, block)
 };
 
-/// Everything a map file holds (format version 1).
+/// Named matrices and byte strings of one object's run-time state (a plugin
+/// object through save_state(), or the kernel's own bookkeeping).
+class StoredState final : public StateWriter, public StateReader {
+ public:
+  /// std::logic_error when the name is already taken.
+  void put(const std::string& name, const Eigen::MatrixXd& value) override;
+  void put_bytes(const std::string& name, const std::string& bytes) override;
+  bool has(const std::string& name) const override;
+  /// std::invalid_argument "no saved array '<name>'" when absent.
+  const Eigen::MatrixXd& get(const std::string& name) const override;
+  const std::string& get_bytes(const std::string& name) const override;
+  const std::map<std::string, Eigen::MatrixXd>& arrays() const { return arrays_; }
+  const std::map<std::string, std::string>& bytes() const { return bytes_; }
+
+ private:
+  std::map<std::string, Eigen::MatrixXd> arrays_;
+  std::map<std::string, std::string> bytes_;
+};
+
+/// The run-time state of one plugin instance (a PSTA record).
+struct StoredPluginState {
+  std::string instance;  ///< "source", "estimator", a sensor name, …
+  std::string plugin;
+  int version = 1;       ///< PluginObject::state_version()
+  StoredState state;
+};
+
+/// What a checkpoint adds to a map (docs/persistence.md §4).
+struct StoredCheckpoint {
+  std::string config_yaml;  ///< the fully resolved configuration (effective_config_yaml)
+  std::string config_file;  ///< the run file it came from (for messages)
+  StoredState run;          ///< the kernel's state (Slam::save_run_state)
+  std::vector<StoredPluginState> plugins;
+};
+
+/// Everything a map file holds (format version 2; a checkpoint when `checkpoint` is set).
 struct StoredMap {
   std::uint32_t format_version = kMapFormatVersion;
   std::string abi_tag;       ///< SDK ABI tag of the writer (sdk_abi_tag())
-  std::string kind = "map";  ///< "map"; "checkpoint" later (docs/persistence.md)
+  std::string kind = "map";  ///< "map" or "checkpoint" (docs/persistence.md)
   std::string run;           ///< the run's name
   Pose6 robot_pose = Pose6::Zero();
   std::vector<StoredType> types;
   std::vector<StoredFeature> features;
   std::vector<StoredShared> shared;
+  std::optional<StoredCheckpoint> checkpoint;  ///< set exactly when kind == "checkpoint"
 };
+
+/// A list of strings as one byte string (each as a u64 length and its bytes),
+/// for StoredState::put_bytes; unpack_strings throws std::invalid_argument on
+/// bytes pack_strings did not write.
+std::string pack_strings(const std::vector<std::string>& strings);
+std::vector<std::string> unpack_strings(const std::string& bytes);
 
 /// The map of a run, every feature through its plugin's save(). A plugin
 /// that throws is reported with the feature id and the plugin (as a
@@ -113,7 +158,10 @@ void write_map_file(const std::filesystem::path& file, const StoredMap& map);
 
 /// Reads and checks a whole map file (magic, format version, SDK version of
 /// the ABI tag, every CRC, the END record, the records' consistency).
-StoredMap read_map_file(const std::filesystem::path& file);
+/// `kind`: the file must be a "map" or a "checkpoint". A map may come from
+/// SDK major version 3 (same feature layout); a checkpoint, whose plugin
+/// states follow the plugin interfaces, only from this build's major version.
+StoredMap read_map_file(const std::filesystem::path& file, const std::string& kind = "map");
 
 /// A feature rebuilt through its plugin's FeatureType::restore().
 struct RestoredFeature {

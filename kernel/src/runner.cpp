@@ -1,12 +1,14 @@
 #include "runner.hpp"
 
 #include <chrono>
+#include <cstdint>
 #include <csignal>
 #include <cstdlib>
 #include <exception>
 #include <memory>
 #include <string>
 
+#include "checkpoint.hpp"
 #include "logging.hpp"
 #include "occupancy_grid.hpp"
 #include "persistence.hpp"
@@ -129,34 +131,46 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
   if (options.write_outputs && slam.config().output.trajectory)
     stream = std::make_unique<TrajectoryStream>(result.output_dir, 2.0, pose_file_frame(slam, PoseFile::Robot));
   const ScanRecording recording(slam, options.write_outputs && slam.config().output.grid.enabled);
+  const std::int64_t every = options.write_checkpoints ? slam.config().checkpoint_every : 0;
+  const auto checkpoint = [&] {
+    const auto t0 = std::chrono::steady_clock::now();
+    result.checkpoint_bytes = write_checkpoint(slam, checkpoint_dir(slam.config()));
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    result.checkpoint_seconds += seconds;
+    ++result.checkpoints;
+    kernel_log().debug("checkpoint at step ", slam.steps_done(), ": ", result.checkpoint_bytes, " bytes in ",
+                       seconds, " s");
+  };
   std::size_t done = 0;
   try {
     while (slam.step()) {
       ++done;
-      progress.update(done, status_line(slam));
+      progress.update(static_cast<std::size_t>(slam.steps_done()), status_line(slam));
       if (stream) stream->append(slam.trajectory());
       if (options.after_step) options.after_step(done);
       if (signals && signals->signal() != 0) {
         result.stop_signal = signals->signal();
+        if (every > 0) checkpoint();  // `--resume` goes on from here
         break;
       }
+      if (every > 0 && slam.steps_done() % every == 0) checkpoint();
     }
   } catch (const std::exception& e) {
-    progress.finish(done, status_line(slam));
-    if (options.write_outputs && done > 0) {
+    progress.finish(static_cast<std::size_t>(slam.steps_done()), status_line(slam));
+    if (options.write_outputs && slam.steps_done() > 0) {
       result.summary = summarize(slam, elapsed());
       result.files = write_outputs(slam, result.summary, result.output_dir, recording.scans());
       if (stream) stream->discard();
-      kernel_log().error("run stopped after ", done, " steps; the outputs of those steps were written to ",
+      kernel_log().error("run stopped after ", slam.steps_done(), " steps; the outputs of those steps were written to ",
                          result.output_dir.string());
     }
     throw;
   }
-  progress.finish(done, status_line(slam));
+  progress.finish(static_cast<std::size_t>(slam.steps_done()), status_line(slam));
   result.summary = summarize(slam, elapsed());
   if (result.stop_signal != 0) {
     const std::size_t total = slam.size_hint();
-    result.summary.interrupted = "interrupted at step " + std::to_string(done) + " of " +
+    result.summary.interrupted = "interrupted at step " + std::to_string(slam.steps_done()) + " of " +
                                  (total > 0 ? std::to_string(total) : std::string("an unknown number")) + " (" +
                                  signal_name(result.stop_signal) + ")";
     kernel_log().warn(result.summary.interrupted, "; writing the outputs of the steps processed (",

@@ -22,10 +22,18 @@ struct RunOptions {
   bool stop_on_signals = false;
   /// Called after every step with the number of steps done (tests).
   std::function<void(std::size_t)> after_step;
+  /// Checkpoints (checkpoint.hpp): when the configuration's
+  /// run.checkpoint_every is N > 0, <output.dir>/checkpoint/ is written after
+  /// every step whose number (counted from the start of the data, restored
+  /// steps included) is a multiple of N, and when a signal interrupts the run.
+  bool write_checkpoints = true;
 };
 
 struct RunResult {
   RunSummary summary;
+  int checkpoints = 0;                 ///< checkpoints written
+  std::uintmax_t checkpoint_bytes = 0;  ///< size of the last one
+  double checkpoint_seconds = 0.0;      ///< wall time of writing them all
   std::filesystem::path output_dir;
   int stop_signal = 0;  ///< the signal that interrupted the run, 0 if none
   std::vector<std::string> files;  ///< the output files written (names in output_dir)

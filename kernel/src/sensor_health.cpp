@@ -8,6 +8,8 @@
 #include <utility>
 
 #include "chi2.hpp"
+#include "mspace/state.hpp"
+#include "persistence.hpp"
 
 namespace mspace::kernel {
 namespace {
@@ -233,6 +235,100 @@ SensorHealthReport SensorHealth::report() const {
     out.kinds.push_back(std::move(r));
   }
   return out;
+}
+
+}  // namespace mspace::kernel
+
+namespace mspace::kernel {
+
+void SensorHealth::save(StateWriter& out, const std::string& prefix) const {
+  Eigen::MatrixXd counts(1, 8);
+  counts << static_cast<double>(r_.readings), static_cast<double>(r_.measurements), static_cast<double>(r_.matched),
+      static_cast<double>(r_.updates), static_cast<double>(readings_since_match_), window_count_, windows_out_,
+      last_side_;
+  out.put(prefix + "counts", counts);
+  Eigen::MatrixXd sums(1, 7);
+  sums << r_.extract_seconds, nis_sum_, expected_sum_, rows_sum_, window_nis_, window_expected_, window_ratio_sum_;
+  out.put(prefix + "sums", sums);
+  Eigen::MatrixXd flags(1, 4);
+  flags << warned_silent_, warned_unmatched_, warned_high_, warned_low_;
+  out.put(prefix + "flags", flags);
+  out.put_bytes(prefix + "warnings", pack_strings(r_.warnings));
+  out.put_bytes(prefix + "notes", pack_strings(r_.notes));
+  out.put_bytes(prefix + "new_warnings", pack_strings(new_warnings_));
+  out.put_bytes(prefix + "new_notes", pack_strings(new_notes_));
+  // NIS by measurement kind: one row per kind, the filter's sums then the
+  // true pose's (updates, rows, nis, expected, at_scale…).
+  constexpr int kSumColumns = 4 + kScaleGrid;
+  std::vector<std::string> names;
+  Eigen::MatrixXd kinds(static_cast<Eigen::Index>(kinds_.size()), 2 * kSumColumns);
+  Eigen::Index row = 0;
+  for (const auto& [name, sums] : kinds_) {
+    names.push_back(name);
+    Eigen::Index col = 0;
+    for (const NisSums* n : {&sums.filter, &sums.true_pose}) {
+      kinds(row, col++) = static_cast<double>(n->updates);
+      kinds(row, col++) = static_cast<double>(n->rows);
+      kinds(row, col++) = n->nis;
+      kinds(row, col++) = n->expected;
+      for (double v : n->at_scale) kinds(row, col++) = v;
+    }
+    ++row;
+  }
+  out.put_bytes(prefix + "kind_names", pack_strings(names));
+  out.put(prefix + "kinds", kinds);
+}
+
+void SensorHealth::restore(const StateReader& in, const std::string& prefix) {
+  const std::string context = "sensor health of " + r_.sensor;
+  const Eigen::MatrixXd& counts = get_state(in, prefix + "counts", 1, 8, context);
+  const Eigen::MatrixXd& sums = get_state(in, prefix + "sums", 1, 7, context);
+  const Eigen::MatrixXd& flags = get_state(in, prefix + "flags", 1, 4, context);
+  for (Eigen::Index i = 0; i < counts.cols(); ++i)
+    if (!(std::abs(counts(0, i)) <= 1e15) || counts(0, i) != std::floor(counts(0, i)))
+      throw std::invalid_argument(context + ": saved count " + std::to_string(i) + " is not an integer");
+  SensorHealthReport r = r_;
+  r.readings = static_cast<std::int64_t>(counts(0, 0));
+  r.measurements = static_cast<std::int64_t>(counts(0, 1));
+  r.matched = static_cast<std::int64_t>(counts(0, 2));
+  r.updates = static_cast<std::int64_t>(counts(0, 3));
+  r.extract_seconds = sums(0, 0);
+  r.warnings = unpack_strings(in.get_bytes(prefix + "warnings"));
+  r.notes = unpack_strings(in.get_bytes(prefix + "notes"));
+  new_warnings_ = unpack_strings(in.get_bytes(prefix + "new_warnings"));
+  new_notes_ = unpack_strings(in.get_bytes(prefix + "new_notes"));
+  const std::vector<std::string> names = unpack_strings(in.get_bytes(prefix + "kind_names"));
+  const Eigen::MatrixXd& kinds =
+      get_state(in, prefix + "kinds", static_cast<Eigen::Index>(names.size()), 2 * (4 + kScaleGrid), context);
+  std::map<std::string, KindSums> restored;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    KindSums& sums = restored[names[i]];
+    Eigen::Index col = 0;
+    const auto row = static_cast<Eigen::Index>(i);
+    for (NisSums* n : {&sums.filter, &sums.true_pose}) {
+      n->updates = static_cast<std::int64_t>(kinds(row, col++));
+      n->rows = static_cast<std::int64_t>(kinds(row, col++));
+      n->nis = kinds(row, col++);
+      n->expected = kinds(row, col++);
+      for (double& v : n->at_scale) v = kinds(row, col++);
+    }
+  }
+  kinds_ = std::move(restored);
+  r_ = std::move(r);
+  readings_since_match_ = static_cast<std::int64_t>(counts(0, 4));
+  window_count_ = static_cast<int>(counts(0, 5));
+  windows_out_ = static_cast<int>(counts(0, 6));
+  last_side_ = static_cast<int>(counts(0, 7));
+  nis_sum_ = sums(0, 1);
+  expected_sum_ = sums(0, 2);
+  rows_sum_ = sums(0, 3);
+  window_nis_ = sums(0, 4);
+  window_expected_ = sums(0, 5);
+  window_ratio_sum_ = sums(0, 6);
+  warned_silent_ = flags(0, 0) != 0.0;
+  warned_unmatched_ = flags(0, 1) != 0.0;
+  warned_high_ = flags(0, 2) != 0.0;
+  warned_low_ = flags(0, 3) != 0.0;
 }
 
 }  // namespace mspace::kernel

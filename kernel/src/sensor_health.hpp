@@ -60,6 +60,10 @@
 
 #include "mspace/pose.hpp"
 #include "mspace/source.hpp"
+namespace mspace {
+class StateWriter;
+class StateReader;
+}  // namespace mspace
 
 namespace mspace::kernel {
 
@@ -146,6 +150,12 @@ class SensorHealth {
   /// Notes made since the last call (for the log).
   std::vector<std::string> take_new_notes();
   SensorHealthReport report() const;
+
+  /// Checkpoints: every counter, sum, window and warning, as arrays named
+  /// "<prefix>…"; restore() reads them back (std::invalid_argument when one is
+  /// missing or malformed). The constructor's settings are not saved.
+  void save(StateWriter& out, const std::string& prefix) const;
+  void restore(const StateReader& in, const std::string& prefix);
 
  private:
   void warn(std::string text);

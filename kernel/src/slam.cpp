@@ -153,6 +153,7 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     problem_ = std::make_unique<Problem>(std::move(pc));
     problem_->start(P0);
   }
+  if (config_.checkpoint_every > 0) require_checkpointable();  // say so now, not at the first checkpoint
 }
 
 Slam::~Slam() {

@@ -14,6 +14,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <optional>
@@ -27,6 +28,7 @@
 #include "config.hpp"
 #include "evaluation.hpp"
 #include "loop_closing.hpp"
+#include "feature_bookkeeping.hpp"
 #include "mspace/estimator.hpp"
 #include "mspace/extractor.hpp"
 #include "mspace/feature.hpp"
@@ -38,28 +40,14 @@
 namespace mspace::kernel {
 
 class Problem;
+struct StoredMap;
 
-/// One feature in the map, as the kernel tracks it.
-struct MapFeature {
+/// One feature in the map, as the kernel tracks it: the plugin's feature and
+/// the kernel's bookkeeping (estimator rows, shared blocks, history).
+struct MapFeature : FeatureBookkeeping {
   int id = 0;
   int type = 0;                      ///< index into Slam::feature_types()
   std::shared_ptr<Feature> feature;  ///< keeps its plugin library loaded
-  /// Estimator indices of its M-space columns, in the feature's column order:
-  /// own_idx, then the shared blocks' indices in ascending block order.
-  std::vector<int> state_idx;
-  std::vector<int> own_idx;        ///< indices of the feature's own dimensions
-  std::map<int, int> shared;       ///< coordinate block → SharedCoordinate id
-  std::int64_t created_step = 0;
-  std::int64_t last_seen_step = 0;
-  int last_sensor = 0;      ///< sensor of the newest evidence
-  double last_seen_t = 0.0;  ///< time stamp of the newest evidence
-  int times_matched = 0;
-  double created_path = 0.0;    ///< path distance (Slam) when created
-  double last_seen_path = 0.0;  ///< path distance of the newest evidence
-  /// Id of the older feature a loop closure found this one to duplicate
-  /// (0: none). It stays in the estimator, tied to that one by a
-  /// coincidence factor or the closure's update, and is no longer associated.
-  int merged_into = 0;
 };
 
 /// A coordinate block common to several features (T-RO §VI), e.g. the corner
@@ -136,6 +124,25 @@ class Slam {
   /// Reads and processes the next data step; false at the end of the data or
   /// after run.max_steps steps.
   bool step();
+  /// Data steps processed so far (restored ones included).
+  std::int64_t steps_done() const { return step_; }
+
+  // ---- Checkpoints (checkpoint.cpp, docs/persistence.md §4) -----------------
+  /// Throws a PluginError when the run cannot be checkpointed: an estimator
+  /// that does not save its state (or that re-linearises: the kernel's
+  /// nonlinear problem is not saved yet).
+  void require_checkpointable() const;
+  /// The whole state of the run: the map (every feature through its plugin's
+  /// save()), the kernel's bookkeeping, every plugin object's run-time state
+  /// and the resolved configuration. `file` is only for error messages.
+  StoredMap snapshot_checkpoint(const std::filesystem::path& file) const;
+  /// Continues from `checkpoint` (read from `file`): only on a Slam freshly
+  /// made from the checkpoint's configuration, before any step(). The data
+  /// source restores its position, or is replayed up to the checkpoint's step
+  /// when it has no state. Throws PersistenceError naming the file (and the
+  /// feature or plugin) on any mismatch; the caller then drops this Slam, so
+  /// nothing half-loaded survives.
+  void restore_checkpoint(const StoredMap& checkpoint, const std::filesystem::path& file);
 
   const RunConfig& config() const { return config_; }
   const Pose6& pose() const { return x_r_; }

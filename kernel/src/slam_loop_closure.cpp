@@ -120,8 +120,11 @@ void Slam::close_loops(const DataStep& data) {
   }
   if (static_cast<int>(local_idx.size()) < a.loop_min_matches || old_idx.empty()) return;
   // Nothing new in the local map since the last search: same answer.
+  // (kept below 2^50 so that a checkpoint stores it exactly as a double)
+  constexpr std::int64_t kSignatureModulus = std::int64_t{1} << 50;
   std::int64_t signature = static_cast<std::int64_t>(local_idx.size());
-  for (int i : local_idx) signature = signature * 1000003 + features_[static_cast<std::size_t>(i)].id;
+  for (int i : local_idx)
+    signature = (signature * 1009 + features_[static_cast<std::size_t>(i)].id) % kSignatureModulus;
   if (signature == last_loop_local_signature_) return;
   last_loop_local_signature_ = signature;
   last_loop_attempt_path_ = path_distance_;

@@ -7,6 +7,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -595,6 +596,123 @@ void CekfFilter::repartition(const std::vector<int>& active_rows) {
   psi_.topLeftCorner(n0, n0).setZero();
   na_ = na;
   n0_ = n0;
+}
+
+// ---------------------------------------------------------------- checkpoints
+
+void CekfFilter::save_state(StateWriter& out) const {
+  Eigen::MatrixXd dims(1, 9);
+  dims << k_, n_, na_, n0_, ns_, dead_slots_, static_cast<double>(updates_), static_cast<double>(global_updates_),
+      constrained_ ? 1.0 : 0.0;
+  out.put("dims", dims);
+  put_ints(out, "slot", slot_);
+  put_ints(out, "active", active_);
+  put_ints(out, "touched", touched_);
+  put_ints(out, "slot_live", slot_live_);
+  support::save_capacity(out, "paa", paa_);
+  support::save_capacity(out, "phi", phi_);
+  support::save_capacity(out, "psi", psi_);
+  support::save_capacity(out, "gt", gt_);
+  support::save_capacity(out, "p0", p0_);
+  out.put("paa", support::pack_lower(paa_, na_));
+  out.put("phi", phi_.topLeftCorner(na_, n0_));
+  out.put("psi", psi_.topLeftCorner(n0_, n0_));
+  out.put("gt", gt_.topLeftCorner(ns_, n0_));
+  // The P⁰ store grows only when a global update needs it: slots past its
+  // size have never been written.
+  const Index p0_used = std::min<Index>(ns_, p0_.rows());
+  out.put("p0_used", Eigen::MatrixXd::Constant(1, 1, static_cast<double>(p0_used)));
+  out.put("p0", support::pack_lower(p0_, p0_used));
+  Eigen::MatrixXd churn(1, 7);
+  churn << (all_active_ ? 1.0 : 0.0), static_cast<double>(interval_), static_cast<double>(interval_rows_),
+      virtual_basis_, virtual_active_, static_cast<double>(fallbacks_), churn_ratio_;
+  out.put("churn", churn);
+  put_ints(out, "seen_in", seen_in_);
+  out.put("memo_entries", Eigen::MatrixXd::Constant(1, 1, static_cast<double>(memo_.size())));
+  int i = 0;
+  for (const auto& [slots, entry] : memo_) {
+    const std::string name = "memo_" + std::to_string(i++);
+    put_ints(out, name + "_slots", slots);
+    out.put(name + "_quadratic", entry.quadratic);
+    out.put(name + "_asked", Eigen::MatrixXd::Constant(1, 1, entry.asked ? 1.0 : 0.0));
+  }
+  if (constrained_) U_.save(out, "unobservable_");
+}
+
+void CekfFilter::restore_state(const StateReader& in, int version) {
+  const std::string context = "cekf restore_state";
+  if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
+  const Eigen::MatrixXd& dims = get_state(in, "dims", 1, 9, context);
+  for (Index j = 0; j < 8; ++j)
+    if (!(dims(0, j) >= 0 && dims(0, j) <= (j < 6 ? 1e8 : 1e15)) || dims(0, j) != std::floor(dims(0, j)))
+      throw std::invalid_argument(context + ": saved dimension " + std::to_string(j) + " is not a count");
+  const int k = static_cast<int>(dims(0, 0)), n = static_cast<int>(dims(0, 1)), na = static_cast<int>(dims(0, 2));
+  const int n0 = static_cast<int>(dims(0, 3)), ns = static_cast<int>(dims(0, 4));
+  if (k < 1 || n < k || na < k || na > n || ns < n - na)
+    throw std::invalid_argument(context + ": saved dimensions are inconsistent");
+  if ((dims(0, 8) != 0.0) != constrained_)
+    throw std::invalid_argument(context + ": saved with observability_constrained " +
+                                (dims(0, 8) != 0.0 ? "true" : "false") + ", this instance has the other setting");
+  CekfFilter f(max_active_, keep_steps_, constrained_, churn_fallback_);
+  f.k_ = k;
+  f.n_ = n;
+  f.na_ = na;
+  f.n0_ = n0;
+  f.ns_ = ns;
+  f.dead_slots_ = static_cast<int>(dims(0, 5));
+  f.updates_ = static_cast<std::int64_t>(dims(0, 6));
+  f.global_updates_ = static_cast<std::int64_t>(dims(0, 7));
+  f.slot_ = get_ints<int>(in, "slot", 0, ns - 1, context);
+  f.active_ = get_ints<int>(in, "active", -1, na - 1, context);
+  f.touched_ = get_ints<std::int64_t>(in, "touched", -1e15, 1e15, context);
+  f.slot_live_ = get_ints<char>(in, "slot_live", 0, 1, context);
+  if (f.slot_.size() != static_cast<std::size_t>(n) || f.active_.size() != static_cast<std::size_t>(n) ||
+      f.touched_.size() != static_cast<std::size_t>(n) || f.slot_live_.size() < static_cast<std::size_t>(ns))
+    throw std::invalid_argument(context + ": saved per-row lists do not match the state dimension");
+  const auto take = [&](const char* name, Eigen::MatrixXd& store, Index rows, Index cols) {
+    const Eigen::MatrixXd& m = get_state(in, name, rows, cols, context);
+    support::require_finite(m, context, name);
+    store = support::restore_capacity(in, name, rows, cols, context);
+    store.topLeftCorner(rows, cols) = m;
+  };
+  const auto take_lower = [&](const char* name, Eigen::MatrixXd& store, Index n) {
+    store = support::restore_capacity(in, name, n, n, context);
+    support::unpack_lower(in.get(name), n, store, context + ": " + name);
+  };
+  take_lower("paa", f.paa_, na);
+  take("phi", f.phi_, na, n0);
+  take("psi", f.psi_, n0, n0);
+  take("gt", f.gt_, ns, n0);
+  const Eigen::MatrixXd& p0_used = get_state(in, "p0_used", 1, 1, context);
+  if (!(p0_used(0, 0) >= 0 && p0_used(0, 0) <= ns) || p0_used(0, 0) != std::floor(p0_used(0, 0)))
+    throw std::invalid_argument(context + ": bad p0_used");
+  take_lower("p0", f.p0_, static_cast<Index>(p0_used(0, 0)));
+  const Eigen::MatrixXd& churn = get_state(in, "churn", 1, 7, context);
+  support::require_finite(churn, context, "churn");
+  f.all_active_ = churn(0, 0) != 0.0;
+  f.interval_ = static_cast<std::int64_t>(churn(0, 1));
+  f.interval_rows_ = static_cast<std::int64_t>(churn(0, 2));
+  f.virtual_basis_ = static_cast<int>(churn(0, 3));
+  f.virtual_active_ = static_cast<int>(churn(0, 4));
+  f.fallbacks_ = static_cast<std::int64_t>(churn(0, 5));
+  f.churn_ratio_ = churn(0, 6);
+  f.seen_in_ = get_ints<std::int64_t>(in, "seen_in", -1e15, 1e15, context);
+  if (f.seen_in_.size() != static_cast<std::size_t>(n))
+    throw std::invalid_argument(context + ": saved 'seen_in' does not match the state dimension");
+  const Eigen::MatrixXd& entries = get_state(in, "memo_entries", 1, 1, context);
+  if (!(entries(0, 0) >= 0 && entries(0, 0) <= 1e9)) throw std::invalid_argument(context + ": bad memo size");
+  for (int i = 0; i < static_cast<int>(entries(0, 0)); ++i) {
+    const std::string name = "memo_" + std::to_string(i);
+    std::vector<int> slots = get_ints<int>(in, name + "_slots", 0, ns - 1, context);
+    MemoEntry entry;
+    entry.quadratic = get_state(in, name + "_quadratic", static_cast<Index>(slots.size()),
+                                static_cast<Index>(slots.size()), context);
+    entry.asked = get_state(in, name + "_asked", 1, 1, context)(0, 0) != 0.0;
+    f.memo_.emplace(std::move(slots), std::move(entry));
+  }
+  if (constrained_) f.U_.restore(in, "unobservable_", n, context);
+  // Everything was read and checked into f: take it.
+  *this = std::move(f);
 }
 
 // ---------------------------------------------------------------- storage

@@ -112,6 +112,14 @@ class CekfFilter final : public Estimator {
   /// propagated values when u is unchanged and start at zero otherwise.
   void set_unobservable(const Eigen::MatrixXd& U_r) override;
 
+  /// Checkpoints: the partition (slots, active positions, touch times), the
+  /// used blocks of P_AA, Φ, Ψ, Gᵀ and P⁰ with their storage capacities, the
+  /// memo of passive quadratics and U: a restored filter computes bit for bit
+  /// as the saved one would have.
+  bool has_state() const override { return true; }
+  void save_state(StateWriter& out) const override;
+  void restore_state(const StateReader& in, int version) override;
+
   /// The global update: brings P_AB and P_BB up to date and re-partitions.
   void flush();
   /// The whole covariance C_state (dim() × dim()), for tests and diagnostics.

@@ -4,6 +4,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -149,6 +150,38 @@ void EkfFilter::reserve(int rows) {
   Eigen::MatrixXd bigger(rows, rows);
   bigger.topLeftCorner(n_, n_).triangularView<Eigen::Lower>() = store_.topLeftCorner(n_, n_);
   store_.swap(bigger);
+}
+
+void EkfFilter::save_state(StateWriter& out) const {
+  Eigen::MatrixXd dims(1, 3);
+  dims << k_, n_, constrained_ ? 1.0 : 0.0;
+  out.put("dims", dims);
+  estimator_support::save_capacity(out, "store", store_);
+  out.put("covariance", estimator_support::pack_lower(store_, n_));
+  if (constrained_) U_.save(out, "unobservable_");
+}
+
+void EkfFilter::restore_state(const StateReader& in, int version) {
+  const std::string context = "ekf restore_state";
+  if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
+  const Eigen::MatrixXd& dims = get_state(in, "dims", 1, 3, context);
+  if (!(dims(0, 0) >= 1 && dims(0, 1) >= dims(0, 0) && dims(0, 1) <= 1e8) || dims(0, 0) != std::floor(dims(0, 0)) ||
+      dims(0, 1) != std::floor(dims(0, 1)))
+    throw std::invalid_argument(context + ": saved dimensions are not integers 1 <= k <= n");
+  const int k = static_cast<int>(dims(0, 0)), n = static_cast<int>(dims(0, 1));
+  if ((dims(0, 2) != 0.0) != constrained_)
+    throw std::invalid_argument(context + ": saved with observability_constrained " +
+                                (dims(0, 2) != 0.0 ? "true" : "false") + ", this instance has the other setting");
+  Eigen::MatrixXd store = estimator_support::restore_capacity(in, "store", n, n, context);
+  if (store.rows() != store.cols()) throw std::invalid_argument(context + ": saved store is not square");
+  estimator_support::unpack_lower(in.get("covariance"), n, store, context);
+  estimator_support::UnobservableDirections U;
+  if (constrained_) U.restore(in, "unobservable_", n, context);
+  // Nothing above changed the filter: now take it all.
+  store_.swap(store);
+  k_ = k;
+  n_ = n;
+  U_ = std::move(U);
 }
 
 Eigen::MatrixXd EkfFilter::covariance() const {

@@ -115,6 +115,59 @@ void UnobservableDirections::augment(const StateAugmentation& aug) {
   U_.bottomRows(rows.rows()) = rows;
 }
 
+void UnobservableDirections::save(StateWriter& out, const std::string& prefix) const {
+  out.put(prefix + "k", Eigen::MatrixXd::Constant(1, 1, k_));
+  out.put(prefix + "U", U_);
+}
+
+void UnobservableDirections::restore(const StateReader& in, const std::string& prefix, Index rows,
+                                     const std::string& context) {
+  const Eigen::MatrixXd& k = get_state(in, prefix + "k", 1, 1, context);
+  const Eigen::MatrixXd& U = get_state(in, prefix + "U", rows, -1, context);
+  require_finite(U, context, "U");
+  if (!(k(0, 0) >= 0 && k(0, 0) <= static_cast<double>(rows)))
+    throw std::invalid_argument(context + ": saved robot dimension " + std::to_string(k(0, 0)) + " is out of range");
+  k_ = static_cast<int>(k(0, 0));
+  U_ = U;
+}
+
+Eigen::MatrixXd pack_lower(const Eigen::MatrixXd& store, Index n) {
+  Eigen::MatrixXd packed(n * (n + 1) / 2, 1);
+  Index at = 0;
+  for (Index c = 0; c < n; ++c) {
+    packed.col(0).segment(at, n - c) = store.col(c).segment(c, n - c);
+    at += n - c;
+  }
+  return packed;
+}
+
+void unpack_lower(const Eigen::MatrixXd& packed, Index n, Eigen::MatrixXd& store, const std::string& context) {
+  require_size(packed, n * (n + 1) / 2, 1, context, "packed lower triangle");
+  require_finite(packed, context, "packed lower triangle");
+  Index at = 0;
+  for (Index c = 0; c < n; ++c) {
+    store.col(c).segment(c, n - c) = packed.col(0).segment(at, n - c);
+    at += n - c;
+  }
+}
+
+void save_capacity(StateWriter& out, const std::string& name, const Eigen::MatrixXd& store) {
+  Eigen::MatrixXd shape(1, 2);
+  shape << static_cast<double>(store.rows()), static_cast<double>(store.cols());
+  out.put(name + "_capacity", shape);
+}
+
+Eigen::MatrixXd restore_capacity(const StateReader& in, const std::string& name, Index rows, Index cols,
+                                 const std::string& context) {
+  const Eigen::MatrixXd& shape = get_state(in, name + "_capacity", 1, 2, context);
+  constexpr double kMaxSide = 1e8;
+  if (!(shape(0, 0) >= static_cast<double>(rows) && shape(0, 1) >= static_cast<double>(cols) &&
+        shape(0, 0) <= kMaxSide && shape(0, 1) <= kMaxSide))
+    throw std::invalid_argument(context + ": saved capacity of '" + name + "' (" + std::to_string(shape(0, 0)) +
+                                " x " + std::to_string(shape(0, 1)) + ") does not hold " + size_text(rows, cols));
+  return Eigen::MatrixXd::Zero(static_cast<Index>(shape(0, 0)), static_cast<Index>(shape(0, 1)));
+}
+
 void UnobservableDirections::keep_rows(const std::vector<int>& keep) { U_ = U_(keep, Eigen::all).eval(); }
 
 std::vector<LinearizedObservation> UnobservableDirections::constrain(const std::vector<LinearizedObservation>& obs,

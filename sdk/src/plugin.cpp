@@ -1,6 +1,8 @@
 #include "mspace/log.hpp"
 #include "mspace/plugin.hpp"
 
+#include <stdexcept>
+
 namespace mspace {
 
 const char* plugin_kind_name(PluginKind kind) {
@@ -12,6 +14,14 @@ const char* plugin_kind_name(PluginKind kind) {
     case PluginKind::Source: return "source";
   }
   return "?";
+}
+
+void PluginObject::save_state(StateWriter& /*out*/) const {
+  throw std::logic_error("this plugin object does not implement save_state()");
+}
+
+void PluginObject::restore_state(const StateReader& /*in*/, int /*version*/) {
+  throw std::logic_error("this plugin object does not implement restore_state()");
 }
 
 namespace {

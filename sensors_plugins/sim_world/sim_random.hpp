@@ -8,7 +8,11 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
 
 namespace mspace::sim_world {
 
@@ -67,6 +71,30 @@ class SimRandom {
       const auto j = static_cast<decltype(i)>(index(static_cast<std::uint64_t>(i) + 1));
       if (j != i) m.row(i).swap(m.row(j));
     }
+  }
+
+ /// The whole generator state as text: the engine's standard text form
+  /// (std::mt19937_64's operator<<, exact and portable) and the spare normal
+  /// sample as its IEEE-754 bits. set_state(state()) continues the same stream.
+  std::string state() const {
+    std::ostringstream os;
+    std::uint64_t spare_bits = 0;
+    static_assert(sizeof spare_bits == sizeof spare_);
+    std::memcpy(&spare_bits, &spare_, sizeof spare_);
+    os << engine_ << ' ' << (has_spare_ ? 1 : 0) << ' ' << spare_bits;
+    return os.str();
+  }
+  /// Throws std::invalid_argument for text state() did not write.
+  void set_state(const std::string& text) {
+    std::istringstream is(text);
+    std::mt19937_64 engine;
+    int has_spare = 0;
+    std::uint64_t spare_bits = 0;
+    if (!(is >> engine >> has_spare >> spare_bits) || (has_spare != 0 && has_spare != 1) || !(is >> std::ws).eof())
+      throw std::invalid_argument("not a random generator state");
+    engine_ = engine;
+    has_spare_ = has_spare == 1;
+    std::memcpy(&spare_, &spare_bits, sizeof spare_);
   }
 
  private:

@@ -198,6 +198,31 @@ bool SimWorld::next(DataStep& step) {
   return true;
 }
 
+void SimWorld::save_state(StateWriter& out) const {
+  out.put("next_step", Eigen::MatrixXd::Constant(1, 1, static_cast<double>(next_step_)));
+  out.put_bytes("odometry_rng", odometry_rng_.state());
+  out.put_bytes("sensor_rng", sensor_rng_.state());
+}
+
+void SimWorld::restore_state(const StateReader& in, int version) {
+  const std::string context = "sim_world restore_state";
+  if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
+  const double next = get_state(in, "next_step", 1, 1, context)(0, 0);
+  if (!(next >= 0 && next <= static_cast<double>(trajectory_.poses.size())) || next != std::floor(next))
+    throw std::invalid_argument(context + ": saved step " + std::to_string(next) + " is not within the route's " +
+                                std::to_string(trajectory_.poses.size()) + " steps (other parameters?)");
+  SimRandom odometry = odometry_rng_, sensor = sensor_rng_;
+  try {
+    odometry.set_state(in.get_bytes("odometry_rng"));
+    sensor.set_state(in.get_bytes("sensor_rng"));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(context + ": " + e.what());
+  }
+  next_step_ = static_cast<std::size_t>(next);
+  odometry_rng_ = odometry;
+  sensor_rng_ = sensor;
+}
+
 Eigen::VectorXd SimWorld::noisy_odometry(const Increment& truth) {
   const Eigen::Vector3d sigma = config_.odometry_noise.sigmas(truth);
   Eigen::VectorXd odometry = truth;

@@ -86,6 +86,12 @@ class SimWorld final : public DataSource {
   Pose6 initial_pose() const override { return trajectory_.poses.front(); }
   Eigen::MatrixXd true_landmarks() const override { return landmarks_; }
 
+  /// Checkpoints: the position in the route and both random generators'
+  /// states (the world and the route are rebuilt from the parameters).
+  bool has_state() const override { return true; }
+  void save_state(StateWriter& out) const override;
+  void restore_state(const StateReader& in, int version) override;
+
   const SimConfig& config() const { return config_; }
   /// The waypoints of one lap of the route.
   const std::vector<Eigen::Vector2d>& waypoints() const { return waypoints_; }

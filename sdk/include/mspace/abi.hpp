@@ -16,7 +16,9 @@
 // map files; Estimator::wants_problem and relinearize, mspace/problem.hpp,
 // EkfFilter in the SDK library; DataStep::odometry_covariance;
 // FeatureType::sample_observation, so that the conformance suite can drive
-// extensions that need a moving sensor; 4: FactorKind::Coincidence and
+// extensions that need a moving sensor; 4, from one session: PluginObject::
+// has_state, state_version, save_state and restore_state with
+// mspace/state.hpp, for checkpoints; FactorKind::Coincidence and
 // NonlinearProblem::loop_closures, loop closing by map matching).
 #define MSPACE_SDK_VERSION_MAJOR 4
 #define MSPACE_SDK_VERSION_MINOR 0

@@ -68,6 +68,12 @@ class EkfFilter final : public Estimator {
   /// propagated values when u is unchanged and start at zero otherwise.
   void set_unobservable(const Eigen::MatrixXd& U_r) override;
 
+  /// Checkpoints: the covariance (lower triangle of the dim() × dim() block),
+  /// the robot dimension, the storage capacity and U; restored exactly.
+  bool has_state() const override { return true; }
+  void save_state(StateWriter& out) const override;
+  void restore_state(const StateReader& in, int version) override;
+
   /// Robot pose dimension k given to reset().
   int robot_dim() const { return k_; }
   /// State rows the storage holds before it has to grow.

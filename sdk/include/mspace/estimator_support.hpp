@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "mspace/estimator.hpp"
+#include "mspace/state.hpp"
 
 namespace mspace::estimator_support {
 
@@ -76,11 +77,34 @@ class UnobservableDirections {
   const Eigen::MatrixXd& matrix() const { return U_; }
   /// u.
   Eigen::Index directions() const { return U_.cols(); }
+  /// Checkpoints: writes k and U as "<prefix>k", "<prefix>U".
+  void save(StateWriter& out, const std::string& prefix) const;
+  /// Reads what save() wrote; U must have `rows` rows and be finite
+  /// (std::invalid_argument naming `context` otherwise).
+  void restore(const StateReader& in, const std::string& prefix, Eigen::Index rows, const std::string& context);
 
  private:
   int k_ = 0;
   Eigen::MatrixXd U_;
 };
+
+/// Checkpoints of a symmetric matrix kept as the lower triangle of a larger
+/// store (ekf, cekf): the lower triangle of the top-left n × n block of
+/// `store`, column by column, as one column of n(n+1)/2 numbers (half the
+/// size of the square; the store's upper triangle is never written).
+Eigen::MatrixXd pack_lower(const Eigen::MatrixXd& store, Eigen::Index n);
+/// Writes what pack_lower() gave into the lower triangle of the top-left
+/// n × n block of `store`; std::invalid_argument (naming `context`) when
+/// `packed` is not n(n+1)/2 × 1 or not finite.
+void unpack_lower(const Eigen::MatrixXd& packed, Eigen::Index n, Eigen::MatrixXd& store, const std::string& context);
+
+/// The saved shape of a store: "<name>_capacity" (rows, cols). Restoring the
+/// same capacity keeps every later operation on the same memory layout, so a
+/// resumed filter computes bit for bit as the saved one would have.
+void save_capacity(StateWriter& out, const std::string& name, const Eigen::MatrixXd& store);
+/// A zero matrix of the saved capacity, which must hold at least rows × cols.
+Eigen::MatrixXd restore_capacity(const StateReader& in, const std::string& name, Eigen::Index rows,
+                                 Eigen::Index cols, const std::string& context);
 
 /// The nearest J' to J (row by row) with J' U = 0: each row loses its
 /// component in the column space of U, J' = J − J U (Uᵀ U)⁺ Uᵀ. The

@@ -14,6 +14,7 @@
 
 #include "mspace/log.hpp"
 #include "mspace/params.hpp"
+#include "mspace/state.hpp"
 
 namespace mspace {
 
@@ -26,6 +27,27 @@ const char* plugin_kind_name(PluginKind kind);
 class PluginObject {
  public:
   virtual ~PluginObject() = default;
+
+  // ---- Run-time state, for checkpoints (mspace/state.hpp, docs/persistence.md) --
+  //
+  // An object whose behaviour depends on more than its parameters and the
+  // calls it is given from now on (an estimator's covariance, a simulator's
+  // random generators and position in its data) says so with has_state() and
+  // saves everything that decides its future: restore_state(save_state())
+  // into a fresh instance made from the same parameters must then behave
+  // exactly as the saved object, bit for bit. Stateless objects are simply
+  // re-created from their parameters on resume. A data source without state
+  // is resumed by replay: the kernel re-creates it and discards the steps
+  // already processed (exact, because sources are deterministic).
+  virtual bool has_state() const { return false; }
+  /// The layout version of save_state(); restore_state() refuses others.
+  virtual int state_version() const { return 1; }
+  /// Default: throws std::logic_error (has_state() without an implementation).
+  virtual void save_state(StateWriter& out) const;
+  /// Restores what save_state() wrote (at `version`) into an object freshly
+  /// made from the same parameters. Throws std::invalid_argument for a version
+  /// or an array it cannot read. Default: throws std::logic_error.
+  virtual void restore_state(const StateReader& in, int version);
 };
 
 /// What the factory receives: the validated parameters, the instance's name

@@ -1,0 +1,407 @@
+// checkpoint.cpp — see checkpoint.hpp and docs/persistence.md §4.
+#include "checkpoint.hpp"
+
+#include <cmath>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "config.hpp"
+#include "persistence.hpp"
+#include "plugin_registry.hpp"
+#include "problem.hpp"
+#include "slam.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+constexpr const char* kCheckpointFile = "map.bin";
+
+/// Poses as the columns of an 8 × N matrix: t, the six pose coordinates, the
+/// known-coordinates mask.
+Eigen::MatrixXd poses_matrix(const std::vector<StampedPose>& poses) {
+  Eigen::MatrixXd m(8, static_cast<Eigen::Index>(poses.size()));
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const auto c = static_cast<Eigen::Index>(i);
+    m(0, c) = poses[i].t;
+    m.col(c).segment<6>(1) = poses[i].pose;
+    m(7, c) = poses[i].known;
+  }
+  return m;
+}
+
+std::vector<StampedPose> poses_from(const StateReader& in, const std::string& name) {
+  const Eigen::MatrixXd& m = get_state(in, name, 8, -1, "run state");
+  std::vector<StampedPose> poses(static_cast<std::size_t>(m.cols()));
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const auto c = static_cast<Eigen::Index>(i);
+    poses[i].t = m(0, c);
+    poses[i].pose = m.col(c).segment<6>(1);
+    if (!(m(7, c) >= 0 && m(7, c) <= kAllPoseCoords)) throw std::invalid_argument("run state: bad pose mask");
+    poses[i].known = static_cast<std::uint8_t>(m(7, c));
+  }
+  return poses;
+}
+
+/// Entry (0, i) of `m`, which must be an integer in [lo, hi] (a count, an id, a step).
+std::int64_t integer_at(const Eigen::MatrixXd& m, Eigen::Index i, double lo, double hi, const char* what) {
+  const double v = m(0, i);
+  if (!(v >= lo && v <= hi) || v != std::floor(v))
+    throw std::invalid_argument(std::string("run state: ") + what + " (" + std::to_string(v) +
+                                ") is not an integer in range");
+  return static_cast<std::int64_t>(v);
+}
+
+Eigen::MatrixXd row_of(std::initializer_list<double> values) {
+  Eigen::MatrixXd m(1, static_cast<Eigen::Index>(values.size()));
+  Eigen::Index i = 0;
+  for (double v : values) m(0, i++) = v;
+  return m;
+}
+
+/// A plugin object of the run with the names that identify it.
+struct PluginRef {
+  std::string instance;
+  std::string plugin;
+  PluginObject* object = nullptr;
+  const LoadedPlugin* library = nullptr;
+};
+
+/// Every plugin object of a run, in a fixed order: source, motion model,
+/// estimator, feature types, extractors.
+std::vector<PluginRef> plugin_objects(const RunConfig& config, DataSource& source, const LoadedPlugin& source_lib,
+                                      MotionModel& motion, const LoadedPlugin& motion_lib, Estimator& estimator,
+                                      const LoadedPlugin& estimator_lib, const std::vector<FeatureTypeSlot>& types,
+                                      const std::vector<SensorSlot>& sensors) {
+  std::vector<PluginRef> refs;
+  refs.push_back({config.source.instance, config.source.plugin, &source, &source_lib});
+  refs.push_back({config.motion.instance, config.motion.plugin, &motion, &motion_lib});
+  refs.push_back({config.estimator.instance, config.estimator.plugin, &estimator, &estimator_lib});
+  for (const FeatureTypeSlot& t : types) refs.push_back({t.instance, t.plugin, t.type.get(), t.library.get()});
+  for (const SensorSlot& s : sensors)
+    refs.push_back({s.config.extractor.instance, s.config.extractor.plugin, s.extractor.get(), s.library.get()});
+  return refs;
+}
+
+}  // namespace
+
+// ---- Slam: saving -------------------------------------------------------------
+
+void Slam::require_checkpointable() const {
+  const bool has_state = guarded(config_.estimator.instance, *estimator_lib_, "has_state",
+                                 [&] { return estimator_->has_state(); });
+  if (!has_state || problem_)
+    throw PluginError("checkpoints are not supported by estimator '" + config_.estimator.plugin + "' yet (" +
+                      (problem_ ? "it re-linearises, and the kernel does not save its nonlinear problem"
+                                : "it does not save its state: PluginObject::save_state") +
+                      "); run without checkpoint_every / --checkpoint-every, or with ekf or cekf");
+}
+
+StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
+  require_checkpointable();
+  StoredMap map = snapshot_map(*this, file);
+  map.kind = "checkpoint";
+  StoredCheckpoint& c = map.checkpoint.emplace();
+  c.config_file = config_.file.string();
+  c.config_yaml = effective_config_yaml(config_);
+
+  // The kernel's own state (RUN): everything step() reads that is not in the
+  // features, the shared coordinates or a plugin.
+  StoredState& run = c.run;
+  run.put("step", row_of({static_cast<double>(step_)}));
+  run.put("time", row_of({t_, started_ ? 1.0 : 0.0, path_distance_, finished_ ? 1.0 : 0.0}));
+  run.put("ids", row_of({static_cast<double>(next_feature_id_), static_cast<double>(next_shared_id_)}));
+  run.put("robot_pose", x_r_);
+  put_ints(run, "dofs", dofs_);
+  run.put("estimator_dim", row_of({static_cast<double>(estimator_->dim())}));
+  const RunStats& s = stats_;
+  run.put("counters", row_of({static_cast<double>(s.steps), static_cast<double>(s.readings),
+                              static_cast<double>(s.measurements), static_cast<double>(s.matched),
+                              static_cast<double>(s.updates), static_cast<double>(s.created),
+                              static_cast<double>(s.extended), static_cast<double>(s.joined),
+                              static_cast<double>(s.pruned), static_cast<double>(s.unknown_channel_readings)}));
+  run.put("seconds", row_of({s.seconds_predict, s.seconds_extract, s.seconds_associate, s.seconds_update,
+                             s.seconds_dense, s.seconds_extend, s.seconds_source}));
+  run.put("nees", Eigen::Map<const Eigen::MatrixXd>(s.nees.data(), static_cast<Eigen::Index>(s.nees.size()), 1));
+  run.put("nees_dof", row_of({static_cast<double>(s.nees_dof)}));
+  run.put("trajectory", poses_matrix(trajectory_));
+  run.put("ground_truth", poses_matrix(ground_truth_));
+  run.put("evaluated", poses_matrix(evaluated_));
+  const AssociationStats& a = associator_.stats();
+  run.put("association", row_of({static_cast<double>(a.jcbb_readings), static_cast<double>(a.jcbb_nodes),
+                                 static_cast<double>(a.jcbb_bounded), static_cast<double>(a.index_queries)}));
+  for (std::size_t i = 0; i < health_.size(); ++i) health_[i].save(run, "health_" + std::to_string(i) + "_");
+  // Loop closing (slam_loop_closure.cpp): its history and counters, and per
+  // feature (id, created_path, last_seen_path, merged_into) — kernel
+  // bookkeeping that map files do not need.
+  Eigen::MatrixXd loop_features(4, static_cast<Eigen::Index>(features_.size()));
+  for (std::size_t i = 0; i < features_.size(); ++i) {
+    const MapFeature& mf = features_[i];
+    loop_features.col(static_cast<Eigen::Index>(i)) << mf.id, mf.created_path, mf.last_seen_path, mf.merged_into;
+  }
+  run.put("loop_features", loop_features);
+  run.put("record_path",
+          Eigen::Map<const Eigen::MatrixXd>(record_path_.data(), static_cast<Eigen::Index>(record_path_.size()), 1));
+  run.put("loops", row_of({last_loop_attempt_path_, static_cast<double>(last_loop_local_signature_), last_anchor_path_,
+                           static_cast<double>(s.loop_attempts), static_cast<double>(s.loop_closures),
+                           static_cast<double>(s.loop_ambiguous), static_cast<double>(s.loop_merged),
+                           static_cast<double>(s.loop_checked), static_cast<double>(s.loop_false),
+                           s.loop_worst_disagreement, s.seconds_loops}));
+
+  // Every plugin object with run-time state (PSTA).
+  for (const PluginRef& p : plugin_objects(config_, *source_, *source_lib_, *motion_, *motion_lib_, *estimator_,
+                                           *estimator_lib_, types_, sensors_)) {
+    if (!guarded(p.instance, *p.library, "has_state", [&] { return p.object->has_state(); })) continue;
+    StoredPluginState ps;
+    ps.instance = p.instance;
+    ps.plugin = p.plugin;
+    try {
+      ps.version = p.object->state_version();
+      p.object->save_state(ps.state);
+    } catch (const std::exception& e) {
+      throw PersistenceError(file, p.instance + ": save_state() failed: " + e.what(), std::nullopt, p.plugin);
+    }
+    c.plugins.push_back(std::move(ps));
+  }
+  return map;
+}
+
+// ---- Slam: restoring ----------------------------------------------------------
+
+void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path& file) {
+  if (!map.checkpoint) throw PersistenceError(file, "not a checkpoint");
+  if (step_ != 0) throw PersistenceError(file, "a checkpoint is restored only into a run that has not started");
+  const StoredCheckpoint& c = *map.checkpoint;
+  const auto fail = [&](const std::string& what, const std::string& plugin = {}) {
+    return PersistenceError(file, what, std::nullopt, plugin);
+  };
+  try {
+    require_checkpointable();
+  } catch (const PluginError& e) {
+    throw fail(e.what(), config_.estimator.plugin);
+  }
+
+  // 1. The features, all or nothing, through their plugins' restore().
+  std::vector<RestoredFeature> restored = restore_features(map, file, types_);
+  std::vector<MapFeature> features;
+  features.reserve(restored.size());
+  for (std::size_t i = 0; i < restored.size(); ++i) {
+    const StoredFeature& sf = map.features[i];
+    MapFeature mf;
+    mf.id = static_cast<int>(sf.id);
+    mf.type = restored[i].type;
+    mf.feature = std::move(restored[i].feature);
+    static_cast<FeatureBookkeeping&>(mf) = sf;
+    if (mf.last_sensor < 0 || mf.last_sensor >= static_cast<int>(sensors_.size()))
+      throw PersistenceError(file, "its last sensor " + std::to_string(mf.last_sensor) + " is not in the run", sf.id,
+                             types_[static_cast<std::size_t>(mf.type)].plugin);
+    features.push_back(std::move(mf));
+  }
+  std::vector<SharedCoordinate> shared;
+  for (const StoredShared& s : map.shared) shared.push_back({s.id, s.kind, s.state_idx, s.members});
+
+  // 2. Every plugin object's state; each must have one record exactly when it has state.
+  std::vector<bool> used(c.plugins.size(), false);
+  for (const PluginRef& p : plugin_objects(config_, *source_, *source_lib_, *motion_, *motion_lib_, *estimator_,
+                                           *estimator_lib_, types_, sensors_)) {
+    std::size_t found = c.plugins.size();
+    for (std::size_t i = 0; i < c.plugins.size(); ++i)
+      if (!used[i] && c.plugins[i].instance == p.instance) found = i;
+    const bool has_state = guarded(p.instance, *p.library, "has_state", [&] { return p.object->has_state(); });
+    if (found == c.plugins.size()) {
+      if (has_state)
+        throw fail(p.instance + ": the plugin has run-time state but the checkpoint holds none for it (written by "
+                   "another version of the plugin?)",
+                   p.plugin);
+      continue;
+    }
+    used[found] = true;
+    const StoredPluginState& ps = c.plugins[found];
+    if (ps.plugin != p.plugin)
+      throw fail(p.instance + ": the checkpoint's state is of plugin '" + ps.plugin + "', this run has '" + p.plugin +
+                     "'",
+                 p.plugin);
+    if (!has_state)
+      throw fail(p.instance + ": the checkpoint holds run-time state for it but the plugin has none (another "
+                 "version of the plugin?)",
+                 p.plugin);
+    try {
+      p.object->restore_state(ps.state, ps.version);
+    } catch (const std::exception& e) {
+      throw fail(p.instance + ": restore_state() refused the saved state (version " + std::to_string(ps.version) +
+                     "): " + e.what(),
+                 p.plugin);
+    }
+  }
+  for (std::size_t i = 0; i < used.size(); ++i)
+    if (!used[i])
+      throw fail("state of instance '" + c.plugins[i].instance + "' (plugin '" + c.plugins[i].plugin +
+                     "'), which this run does not have",
+                 c.plugins[i].plugin);
+
+  // 3. The kernel's own state.
+  const StoredState& run = c.run;
+  std::int64_t step = 0;
+  try {
+    step = integer_at(get_state(run, "step", 1, 1, "run state"), 0, 0, 1e15, "step");
+    const Eigen::MatrixXd& time = get_state(run, "time", 1, 4, "run state");
+    const Eigen::MatrixXd& ids = get_state(run, "ids", 1, 2, "run state");
+    const std::int64_t next_feature_id = integer_at(ids, 0, 1, 2e9, "next feature id");
+    const std::int64_t next_shared_id = integer_at(ids, 1, 1, 2e9, "next shared id");
+    const std::vector<int> dofs = get_ints<int>(run, "dofs", 0, 5, "run state");
+    if (dofs != dofs_) throw std::invalid_argument("the robot's estimated coordinates differ from the motion model's");
+    const auto estimator_dim =
+        static_cast<int>(integer_at(get_state(run, "estimator_dim", 1, 1, "run state"), 0, 1, 1e8, "estimator_dim"));
+    if (estimator_->dim() != estimator_dim)
+      throw std::invalid_argument("the estimator has " + std::to_string(estimator_->dim()) +
+                                  " state rows after restore_state(), the run had " + std::to_string(estimator_dim));
+    for (const MapFeature& mf : features)
+      for (int i : mf.state_idx)
+        if (i < static_cast<int>(dofs_.size()) || i >= estimator_dim)
+          throw PersistenceError(file, "state index " + std::to_string(i) + " is outside the estimator's rows", mf.id,
+                                 types_[static_cast<std::size_t>(mf.type)].plugin);
+    const Eigen::MatrixXd& counters = get_state(run, "counters", 1, 10, "run state");
+    const Eigen::MatrixXd& seconds = get_state(run, "seconds", 1, 7, "run state");
+    const Eigen::MatrixXd& nees = get_state(run, "nees", -1, 1, "run state");
+    const Eigen::MatrixXd& association = get_state(run, "association", 1, 4, "run state");
+    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 11, "run state");
+    const Eigen::MatrixXd& record_path = get_state(run, "record_path", -1, 1, "run state");
+    const Eigen::MatrixXd& loop_features =
+        get_state(run, "loop_features", 4, static_cast<Eigen::Index>(features.size()), "run state");
+    for (std::size_t i = 0; i < features.size(); ++i) {
+      const auto c = static_cast<Eigen::Index>(i);
+      if (loop_features(0, c) != features[i].id) throw fail("run state: 'loop_features' is not in the map's order");
+      features[i].created_path = loop_features(1, c);
+      features[i].last_seen_path = loop_features(2, c);
+      features[i].merged_into = static_cast<int>(integer_at(loop_features.col(c).transpose(), 3, 0, 1e9, "merged_into"));
+    }
+    std::vector<StampedPose> trajectory = poses_from(run, "trajectory");
+    std::vector<StampedPose> ground_truth = poses_from(run, "ground_truth");
+    std::vector<StampedPose> evaluated = poses_from(run, "evaluated");
+    for (std::size_t i = 0; i < health_.size(); ++i) health_[i].restore(run, "health_" + std::to_string(i) + "_");
+
+    RunStats s;
+    s.steps = integer_at(counters, 0, 0, 1e15, "steps");
+    s.readings = integer_at(counters, 1, 0, 1e15, "readings");
+    s.measurements = integer_at(counters, 2, 0, 1e15, "measurements");
+    s.matched = integer_at(counters, 3, 0, 1e15, "matched");
+    s.updates = integer_at(counters, 4, 0, 1e15, "updates");
+    s.created = integer_at(counters, 5, 0, 1e15, "created");
+    s.extended = integer_at(counters, 6, 0, 1e15, "extended");
+    s.joined = integer_at(counters, 7, 0, 1e15, "joined");
+    s.pruned = integer_at(counters, 8, 0, 1e15, "pruned");
+    s.unknown_channel_readings = integer_at(counters, 9, 0, 1e15, "readings without sensor");
+    s.seconds_predict = seconds(0, 0);
+    s.seconds_extract = seconds(0, 1);
+    s.seconds_associate = seconds(0, 2);
+    s.seconds_update = seconds(0, 3);
+    s.seconds_dense = seconds(0, 4);
+    s.seconds_extend = seconds(0, 5);
+    s.seconds_source = seconds(0, 6);
+    s.nees.assign(nees.data(), nees.data() + nees.size());
+    s.nees_dof = static_cast<int>(integer_at(get_state(run, "nees_dof", 1, 1, "run state"), 0, 0, 6, "nees_dof"));
+    AssociationStats a;
+    a.jcbb_readings = integer_at(association, 0, 0, 1e15, "jcbb_readings");
+    a.jcbb_nodes = integer_at(association, 1, 0, 1e15, "jcbb_nodes");
+    a.jcbb_bounded = integer_at(association, 2, 0, 1e15, "jcbb_bounded");
+    a.index_queries = integer_at(association, 3, 0, 1e15, "index_queries");
+    s.loop_attempts = integer_at(loops, 3, 0, 1e15, "loop_attempts");
+    s.loop_closures = integer_at(loops, 4, 0, 1e15, "loop_closures");
+    s.loop_ambiguous = integer_at(loops, 5, 0, 1e15, "loop_ambiguous");
+    s.loop_merged = integer_at(loops, 6, 0, 1e15, "loop_merged");
+    s.loop_checked = integer_at(loops, 7, 0, 1e15, "loop_checked");
+    s.loop_false = integer_at(loops, 8, 0, 1e15, "loop_false");
+    s.loop_worst_disagreement = loops(0, 9);
+    s.seconds_loops = loops(0, 10);
+
+    // Everything read: take it.
+    features_ = std::move(features);
+    shared_ = std::move(shared);
+    t_ = time(0, 0);
+    started_ = time(0, 1) != 0.0;
+    path_distance_ = time(0, 2);
+    finished_ = time(0, 3) != 0.0;
+    next_feature_id_ = static_cast<int>(next_feature_id);
+    next_shared_id_ = static_cast<int>(next_shared_id);
+    x_r_ = get_state(run, "robot_pose", 6, 1, "run state");
+    stats_ = std::move(s);
+    associator_.restore_stats(a);
+    trajectory_ = std::move(trajectory);
+    ground_truth_ = std::move(ground_truth);
+    evaluated_ = std::move(evaluated);
+    record_path_.assign(record_path.data(), record_path.data() + record_path.size());
+    last_loop_attempt_path_ = loops(0, 0);
+    last_loop_local_signature_ = static_cast<std::int64_t>(loops(0, 1));
+    last_anchor_path_ = loops(0, 2);
+  } catch (const PersistenceError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw fail(e.what());
+  }
+
+  // 4. The data source's position: restored with its state, or replayed.
+  const bool source_has_state =
+      guarded(config_.source.instance, *source_lib_, "has_state", [&] { return source_->has_state(); });
+  if (!source_has_state) {
+    DataStep skipped;
+    for (std::int64_t k = 0; k < step; ++k)
+      if (!guarded(config_.source.instance, *source_lib_, "next", [&] { return source_->next(skipped); }))
+        throw fail(config_.source.instance + ": the data ends after " + std::to_string(k) +
+                       " steps, before the checkpoint's step " + std::to_string(step) + " (other data?)",
+                   config_.source.plugin);
+  }
+  step_ = step;
+}
+
+// ---- Files ----------------------------------------------------------------------
+
+std::filesystem::path checkpoint_dir(const RunConfig& config) {
+  return std::filesystem::path(config.output.dir) / "checkpoint";
+}
+
+std::uintmax_t write_checkpoint(const Slam& slam, const std::filesystem::path& dir) {
+  const std::filesystem::path file = dir / kCheckpointFile;
+  write_map_file(file, slam.snapshot_checkpoint(file));
+  return std::filesystem::file_size(file);
+}
+
+std::filesystem::path find_checkpoint_file(const std::filesystem::path& given) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::is_regular_file(given, ec)) return given;
+  if (fs::is_directory(given, ec)) {
+    // A run's output folder holds its final map.bin too: its checkpoint first.
+    if (fs::is_regular_file(given / "checkpoint" / kCheckpointFile, ec)) return given / "checkpoint" / kCheckpointFile;
+    if (fs::is_regular_file(given / kCheckpointFile, ec)) return given / kCheckpointFile;
+    throw PersistenceError(given, std::string("no checkpoint here: neither ") + kCheckpointFile + " nor checkpoint/" +
+                                      kCheckpointFile);
+  }
+  throw PersistenceError(given, "no such file or folder");
+}
+
+std::unique_ptr<Slam> resume_from_checkpoint(const std::filesystem::path& given, PluginRegistry& registry,
+                                             const std::function<void(RunConfig&)>& adjust) {
+  const std::filesystem::path file = find_checkpoint_file(given);
+  const StoredMap map = read_map_file(file, "checkpoint");  // the whole file, checked
+  const StoredCheckpoint& c = *map.checkpoint;
+  RunConfig config;
+  try {
+    config = parse_config(c.config_yaml, file.string() + " (configuration of " + c.config_file + ")", registry);
+  } catch (const std::exception& e) {
+    throw PersistenceError(file, std::string("its configuration does not load with the plugins installed now: ") +
+                                     e.what());
+  }
+  config.file = c.config_file;
+  for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
+  if (adjust) adjust(config);
+  std::unique_ptr<Slam> slam;
+  try {
+    slam = std::make_unique<Slam>(config, registry);
+  } catch (const std::exception& e) {
+    throw PersistenceError(file, std::string("cannot make the run's plugins: ") + e.what());
+  }
+  slam->restore_checkpoint(map, file);
+  return slam;
+}
+
+}  // namespace mspace::kernel

@@ -1,0 +1,507 @@
+// Checkpoints and resume (issue 11 item 3; kernel/src/checkpoint.cpp,
+// docs/persistence.md §4): a run checkpointed at step K and resumed from that
+// checkpoint up to step M writes the same trajectory.tum, ground_truth.tum,
+// map.yaml and summary.yaml (timings aside) as one uninterrupted run of M
+// steps — on the simulated world, Intel, Victoria Park and a ceiling-camera
+// route, under ekf and cekf. The smoother, which does not save its state yet,
+// is refused with a clear error; so are corrupt, truncated and foreign files.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <csignal>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "checkpoint.hpp"
+#include "config.hpp"
+#include "logging.hpp"
+#include "persistence.hpp"
+#include "plugin_registry.hpp"
+#include "runner.hpp"
+#include "slam.hpp"
+
+namespace {
+
+using namespace mspace;
+using namespace mspace::kernel;
+namespace fs = std::filesystem;
+
+/// The brief's tolerance for "equal": every number of every output within 1e-9.
+constexpr double kTolerance = 1e-9;
+
+fs::path scratch(const std::string& name) {
+  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "test-output" / "checkpoint" /
+                       ::testing::UnitTest::GetInstance()->current_test_info()->name() / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+fs::path datasets() {
+  const char* env = std::getenv("MSPACE_DATA");
+  return env != nullptr && *env != '\0' ? fs::path(env) : fs::path(MSPACE_SOURCE_DIR).parent_path() / "shared" / "datasets";
+}
+
+fs::path config_file(const std::string& name) { return fs::path(MSPACE_SOURCE_DIR) / "config" / name; }
+
+std::string read_text(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+/// The lines of an output file, without the wall-clock timings of a
+/// summary.yaml (wall_seconds, the timings_seconds block, extract_seconds).
+std::vector<std::string> comparable_lines(const fs::path& file) {
+  std::istringstream in(read_text(file));
+  std::vector<std::string> lines;
+  std::string line;
+  std::size_t skip_deeper_than = std::string::npos;
+  while (std::getline(in, line)) {
+    const std::size_t indent = line.find_first_not_of(' ');
+    if (skip_deeper_than != std::string::npos && indent != std::string::npos && indent > skip_deeper_than) continue;
+    skip_deeper_than = std::string::npos;
+    const std::string key = indent == std::string::npos ? "" : line.substr(indent, line.find(':', indent) - indent);
+    if (key == "timings_seconds") {
+      skip_deeper_than = indent;
+      continue;
+    }
+    if (key == "wall_seconds" || key == "extract_seconds") continue;
+    lines.push_back(line);
+  }
+  return lines;
+}
+
+/// Splits a line into numbers and other tokens.
+std::vector<std::string> tokens(const std::string& line) {
+  std::vector<std::string> out;
+  std::string token;
+  for (char c : line) {
+    if (c == ' ' || c == ',' || c == '[' || c == ']' || c == '{' || c == '}' || c == ':') {
+      if (!token.empty()) out.push_back(token);
+      token.clear();
+      if (c != ' ') out.emplace_back(1, c);
+    } else {
+      token += c;
+    }
+  }
+  if (!token.empty()) out.push_back(token);
+  return out;
+}
+
+bool as_number(const std::string& s, double& value) {
+  char* end = nullptr;
+  value = std::strtod(s.c_str(), &end);
+  return end != s.c_str() && *end == '\0';
+}
+
+/// How two output files compare: the numbers of lines, the largest absolute
+/// difference of two numbers in the same place, and the first other mismatch.
+struct FileComparison {
+  std::size_t lines_a = 0, lines_b = 0, numbers = 0;
+  double max_difference = 0.0;
+  std::string mismatch;
+};
+
+FileComparison compare_files(const fs::path& a, const fs::path& b) {
+  FileComparison r;
+  const std::vector<std::string> la = comparable_lines(a), lb = comparable_lines(b);
+  r.lines_a = la.size();
+  r.lines_b = lb.size();
+  for (std::size_t i = 0; i < std::min(la.size(), lb.size()) && r.mismatch.empty(); ++i) {
+    const std::vector<std::string> ta = tokens(la[i]), tb = tokens(lb[i]);
+    if (ta.size() != tb.size()) r.mismatch = "line " + std::to_string(i + 1) + ": '" + la[i] + "' vs '" + lb[i] + "'";
+    for (std::size_t j = 0; j < ta.size() && r.mismatch.empty(); ++j) {
+      double x = 0.0, y = 0.0;
+      if (as_number(ta[j], x) && as_number(tb[j], y)) {
+        ++r.numbers;
+        r.max_difference = std::max(r.max_difference, std::abs(x - y));
+      } else if (ta[j] != tb[j]) {
+        r.mismatch = "line " + std::to_string(i + 1) + ": '" + la[i] + "' vs '" + lb[i] + "'";
+      }
+    }
+  }
+  return r;
+}
+
+struct Legs {
+  std::string config;     ///< file in config/
+  std::string estimator;  ///< --estimator
+  std::int64_t checkpoint_at = 0, stop_at = 0;
+  std::function<void(RunConfig&)> edit;  ///< optional, on every leg
+};
+
+RunConfig load(const Legs& legs, PluginRegistry& registry, const fs::path& out, std::int64_t max_steps) {
+  RunConfig config = load_config(config_file(legs.config), registry);
+  for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
+  override_estimator(config, legs.estimator, registry);
+  if (legs.edit) legs.edit(config);
+  apply_run_seed(config);
+  config.output.dir = out.string();
+  config.output.picture = false;
+  config.max_steps = max_steps;
+  return config;
+}
+
+RunOptions quiet() {
+  RunOptions options;
+  options.progress = false;
+  return options;
+}
+
+/// The uninterrupted run to stop_at; the run to checkpoint_at with a
+/// checkpoint there; the run resumed from it to stop_at. Every output of the
+/// resumed run must equal the uninterrupted run's (to 1e-9; in fact exactly).
+void expect_resume_equals_uninterrupted(const Legs& legs) {
+  set_log_level(LogLevel::Warn);
+  const fs::path whole = scratch("whole"), first = scratch("first"), resumed = scratch("resumed");
+  std::vector<StampedPose> reference;
+  {
+    PluginRegistry registry;
+    registry.add_search_dir(MSPACE_PLUGIN_DIR);
+    Slam slam(load(legs, registry, whole, legs.stop_at), registry);
+    run_to_end(slam, quiet());
+    reference = slam.trajectory();
+    ASSERT_EQ(slam.steps_done(), legs.stop_at) << "the data is shorter than the test assumes";
+  }
+  {
+    PluginRegistry registry;
+    registry.add_search_dir(MSPACE_PLUGIN_DIR);
+    RunConfig config = load(legs, registry, first, legs.checkpoint_at);
+    config.checkpoint_every = legs.checkpoint_at;
+    Slam slam(config, registry);
+    const RunResult result = run_to_end(slam, quiet());
+    ASSERT_EQ(result.checkpoints, 1);
+    ASSERT_TRUE(fs::exists(first / "checkpoint" / "map.bin"));
+    std::cout << "[ checkpoint ] " << legs.config << " / " << legs.estimator << " at step " << legs.checkpoint_at
+              << ": " << result.checkpoint_bytes << " bytes, written in " << result.checkpoint_seconds << " s\n";
+  }
+  {
+    PluginRegistry registry;
+    registry.add_search_dir(MSPACE_PLUGIN_DIR);
+    std::unique_ptr<Slam> slam = resume_from_checkpoint(first / "checkpoint", registry, [&](RunConfig& c) {
+      c.output.dir = resumed.string();
+      c.max_steps = legs.stop_at;
+      c.checkpoint_every = 0;
+    });
+    ASSERT_EQ(slam->steps_done(), legs.checkpoint_at);
+    EXPECT_EQ(slam->config().estimator.plugin, legs.estimator);
+    run_to_end(*slam, quiet());
+    ASSERT_EQ(slam->trajectory().size(), reference.size());
+    std::size_t different = 0;
+    for (std::size_t i = 0; i < reference.size(); ++i)
+      if (slam->trajectory()[i].t != reference[i].t || slam->trajectory()[i].pose != reference[i].pose) ++different;
+    EXPECT_EQ(different, 0u) << "poses not bit for bit equal (the file comparison below says by how much)";
+  }
+  std::vector<std::string> outputs = {"trajectory.tum", "map.yaml", "summary.yaml"};
+  if (fs::exists(whole / "ground_truth.tum")) outputs.push_back("ground_truth.tum");
+  for (const std::string& name : outputs) {
+    ASSERT_TRUE(fs::exists(resumed / name)) << name;
+    const FileComparison c = compare_files(whole / name, resumed / name);
+    EXPECT_EQ(c.lines_a, c.lines_b) << name;
+    EXPECT_TRUE(c.mismatch.empty()) << name << ": " << c.mismatch;
+    EXPECT_LE(c.max_difference, kTolerance) << name;
+    EXPECT_GT(c.numbers, 10u) << name << " compared too few numbers";
+    std::cout << "[ compared   ] " << name << ": " << c.numbers << " numbers, largest difference " << c.max_difference
+              << "\n";
+  }
+}
+
+// ---------------------------------------------------------------- every data set, ekf and cekf
+
+TEST(Checkpoint, SimPointsEkf) { expect_resume_equals_uninterrupted({"sim_points.yaml", "ekf", 1500, 3000, {}}); }
+
+TEST(Checkpoint, SimPointsCekf) { expect_resume_equals_uninterrupted({"sim_points.yaml", "cekf", 1500, 3000, {}}); }
+
+// The observability-constrained mode carries the unobservable directions U:
+// they are part of the saved state.
+TEST(Checkpoint, SimPointsObservabilityConstrainedEkfAndCekf) {
+  for (const char* estimator : {"ekf", "cekf"}) {
+    SCOPED_TRACE(estimator);
+    expect_resume_equals_uninterrupted({"sim_points.yaml", estimator, 700, 1400, [](RunConfig& c) {
+                                          c.estimator.params.set("observability_constrained", true);
+                                        }});
+  }
+}
+
+bool have_intel() {
+  if (!fs::exists(datasets() / "intel_lab" / "intel_910_scans.txt")) return false;
+  setenv("MSPACE_DATA", datasets().c_str(), 0);
+  return true;
+}
+
+bool have_victoria_park() {
+  if (!fs::exists(datasets() / "victoria_park")) return false;
+  setenv("MSPACE_DATA", datasets().c_str(), 0);
+  return true;
+}
+
+// Walls, shared corners, joint compatibility and laser odometry (the source
+// has no state: it is replayed, scan matching included).
+TEST(Checkpoint, IntelEkf) {
+  if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
+  expect_resume_equals_uninterrupted({"intel_walls.yaml", "ekf", 300, 600, {}});
+}
+
+TEST(Checkpoint, IntelCekf) {
+  if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
+  expect_resume_equals_uninterrupted({"intel_walls.yaml", "cekf", 300, 600, {}});
+}
+
+TEST(Checkpoint, VictoriaParkEkf) {
+  if (!have_victoria_park()) GTEST_SKIP() << "Victoria Park data not found in " << datasets() / "victoria_park";
+  expect_resume_equals_uninterrupted({"victoria_park.yaml", "ekf", 2000, 4000, {}});
+}
+
+TEST(Checkpoint, VictoriaParkCekf) {
+  if (!have_victoria_park()) GTEST_SKIP() << "Victoria Park data not found in " << datasets() / "victoria_park";
+  expect_resume_equals_uninterrupted({"victoria_park.yaml", "cekf", 2000, 4000, {}});
+}
+
+// The rendered ceiling route of tests/ceiling_runs (a CTest fixture renders it):
+// lines and lamps from images, hline and bearing-only points.
+TEST(Checkpoint, CeilingEkfAndCekf) {
+  if (!fs::exists(fs::path(MSPACE_CEILING_ROUTE) / "odometry.csv"))
+    GTEST_SKIP() << "the rendered ceiling route is not at " << MSPACE_CEILING_ROUTE
+                 << " (the CTest fixture render_ceiling_route makes it)";
+  setenv("MSPACE_CEILING", MSPACE_CEILING_ROUTE, 1);
+  for (const char* estimator : {"ekf", "cekf"}) {
+    SCOPED_TRACE(estimator);
+    expect_resume_equals_uninterrupted({"ceiling_both.yaml", estimator, 200, 400, {}});
+  }
+}
+
+// ---------------------------------------------------------------- the command line
+
+int run_mspace(const std::string& arguments, const fs::path& log) {
+  const std::string command = std::string(MSPACE_BINARY_DIR) + "/bin/mspace " + arguments + " --quiet --plugin-dir " +
+                              MSPACE_PLUGIN_DIR + " > " + log.string() + " 2>&1";
+  const int status = std::system(command.c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// `mspace run --checkpoint-every` and `mspace run --resume` as a user types them.
+TEST(Checkpoint, CommandLineResumeEqualsUninterruptedRun) {
+  const fs::path dir = scratch("cli");
+  const std::string config = config_file("sim_points.yaml").string();
+  ASSERT_EQ(run_mspace("run " + config + " --max-steps 800 --out " + (dir / "whole").string(), dir / "whole.log"), 0)
+      << read_text(dir / "whole.log");
+  ASSERT_EQ(run_mspace("run " + config + " --max-steps 400 --checkpoint-every 200 --out " + (dir / "first").string(),
+                       dir / "first.log"),
+            0)
+      << read_text(dir / "first.log");
+  EXPECT_NE(read_text(dir / "first.log").find("mspace run --resume"), std::string::npos) << read_text(dir / "first.log");
+  ASSERT_EQ(run_mspace("run --resume " + (dir / "first").string() + " --max-steps 800 --out " +
+                           (dir / "resumed").string(),
+                       dir / "resumed.log"),
+            0)
+      << read_text(dir / "resumed.log");
+  for (const char* name : {"trajectory.tum", "map.yaml", "summary.yaml", "ground_truth.tum"}) {
+    const FileComparison c = compare_files(dir / "whole" / name, dir / "resumed" / name);
+    EXPECT_EQ(c.lines_a, c.lines_b) << name;
+    EXPECT_TRUE(c.mismatch.empty()) << name << ": " << c.mismatch;
+    EXPECT_LE(c.max_difference, kTolerance) << name;
+  }
+  // A configuration file next to --resume is refused: the checkpoint's is used.
+  EXPECT_EQ(run_mspace("run " + config + " --resume " + (dir / "first").string(), dir / "both.log"), 1);
+  EXPECT_NE(read_text(dir / "both.log").find("--resume takes the configuration from the checkpoint"),
+            std::string::npos)
+      << read_text(dir / "both.log");
+}
+
+// A run stopped by a signal (as Ctrl-C does) writes a checkpoint where it
+// stopped, even between multiples of checkpoint_every, and the resumed run
+// equals the uninterrupted one.
+TEST(Checkpoint, InterruptedRunCheckpointsWhereItStopped) {
+  set_log_level(LogLevel::Warn);
+  const fs::path dir = scratch("signal");
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  const auto config_for = [&](const fs::path& out, std::int64_t max_steps) {
+    RunConfig config = load_config(config_file("sim_points.yaml"), registry);
+    config.output.dir = out.string();
+    config.output.picture = false;
+    config.max_steps = max_steps;
+    return config;
+  };
+  std::vector<StampedPose> reference;
+  {
+    Slam slam(config_for(dir / "whole", 600), registry);
+    run_to_end(slam, quiet());
+    reference = slam.trajectory();
+  }
+  {
+    RunConfig config = config_for(dir / "stopped", 600);
+    config.checkpoint_every = 1000;  // never reached: only the interruption writes one
+    Slam slam(config, registry);
+    RunOptions options = quiet();
+    options.stop_on_signals = true;
+    options.after_step = [](std::size_t done) {
+      if (done == 237) std::raise(SIGINT);
+    };
+    const RunResult result = run_to_end(slam, options);
+    EXPECT_EQ(result.stop_signal, SIGINT);
+    EXPECT_EQ(result.checkpoints, 1);
+  }
+  std::unique_ptr<Slam> slam = resume_from_checkpoint(dir / "stopped", registry, [&](RunConfig& c) {
+    c.output.dir = (dir / "resumed").string();
+  });
+  EXPECT_EQ(slam->steps_done(), 237);
+  run_to_end(*slam, quiet());
+  ASSERT_EQ(slam->trajectory().size(), reference.size());
+  for (std::size_t i = 0; i < reference.size(); ++i)
+    ASSERT_TRUE(slam->trajectory()[i].pose == reference[i].pose) << "pose " << i;
+  const FileComparison c = compare_files(dir / "whole" / "map.yaml", dir / "resumed" / "map.yaml");
+  EXPECT_TRUE(c.mismatch.empty()) << c.mismatch;
+  EXPECT_EQ(c.max_difference, 0.0);
+}
+
+// ---------------------------------------------------------------- refusals
+
+/// A checkpoint of sim_points at step 100 (ekf); returns its map.bin.
+fs::path small_checkpoint(const fs::path& dir) {
+  set_log_level(LogLevel::Warn);
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunConfig config = load_config(config_file("sim_points.yaml"), registry);
+  config.output.dir = dir.string();
+  config.output.picture = false;
+  config.max_steps = 100;
+  config.checkpoint_every = 100;
+  Slam slam(config, registry);
+  run_to_end(slam, quiet());
+  return dir / "checkpoint" / "map.bin";
+}
+
+std::string resume_error(const fs::path& checkpoint) {
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  try {
+    resume_from_checkpoint(checkpoint, registry);
+  } catch (const PersistenceError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(Checkpoint, SmootherIsRefusedWithAClearError) {
+  set_log_level(LogLevel::Warn);
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunConfig config = load_config(config_file("sim_points.yaml"), registry);
+  override_estimator(config, "smoother", registry);
+  config.output.dir = scratch("smoother").string();
+  config.checkpoint_every = 100;
+  try {
+    Slam slam(config, registry);
+    FAIL() << "a smoother run with checkpoints started";
+  } catch (const PluginError& e) {
+    EXPECT_NE(std::string(e.what()).find("checkpoints are not supported by estimator 'smoother' yet"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(Checkpoint, CorruptTruncatedAndForeignFilesAreRefusedNamingTheFile) {
+  const fs::path dir = scratch("refusals");
+  const fs::path file = small_checkpoint(dir / "run");
+  ASSERT_TRUE(fs::exists(file));
+  const std::string bytes = read_text(file);
+  ASSERT_GT(bytes.size(), 1000u);
+  EXPECT_EQ(resume_error(dir / "run"), "(no error)") << "the intact checkpoint must resume";
+
+  const auto variant = [&](const std::string& name, const std::string& content) {
+    const fs::path f = dir / name / "map.bin";
+    fs::create_directories(f.parent_path());
+    std::ofstream(f, std::ios::binary) << content;
+    return f;
+  };
+  // Truncated half-way: no END record.
+  {
+    const fs::path f = variant("truncated", bytes.substr(0, bytes.size() / 2));
+    const std::string e = resume_error(f.parent_path());
+    EXPECT_NE(e.find(f.string()), std::string::npos) << e;
+    EXPECT_NE(e.find("truncated"), std::string::npos) << e;
+  }
+  // One flipped bit near the end (inside the plugin states or RUN).
+  {
+    std::string flipped = bytes;
+    flipped[flipped.size() - 200] = static_cast<char>(flipped[flipped.size() - 200] ^ 0x10);
+    const fs::path f = variant("flipped", flipped);
+    const std::string e = resume_error(f);
+    EXPECT_NE(e.find(f.string()), std::string::npos) << e;
+    EXPECT_NE(e.find("CRC-32"), std::string::npos) << e;
+  }
+  // Another container format version.
+  {
+    std::string other = bytes;
+    other[8] = 9;
+    const std::string e = resume_error(variant("version", other));
+    EXPECT_NE(e.find("format version 9"), std::string::npos) << e;
+  }
+  // A map is not a checkpoint.
+  {
+    const std::string e = resume_error(dir / "run" / "map.bin");
+    EXPECT_NE(e.find("this is a map, not a checkpoint"), std::string::npos) << e;
+  }
+  // Nothing there.
+  {
+    const std::string e = resume_error(dir / "nowhere");
+    EXPECT_NE(e.find("no such file or folder"), std::string::npos) << e;
+  }
+  // A checkpoint that cannot be made (here: a smoother run, refused before
+  // anything is written) leaves the previous one in that folder untouched.
+  {
+    PluginRegistry registry;
+    registry.add_search_dir(MSPACE_PLUGIN_DIR);
+    RunConfig config = load_config(config_file("sim_points.yaml"), registry);
+    override_estimator(config, "smoother", registry);
+    config.output.dir = (dir / "smoother").string();
+    Slam slam(config, registry);
+    for (int i = 0; i < 5; ++i) slam.step();
+    EXPECT_THROW(write_checkpoint(slam, file.parent_path()), PluginError);
+    EXPECT_EQ(read_text(file), bytes);
+    EXPECT_EQ(resume_error(dir / "run"), "(no error)");
+  }
+}
+
+// A checkpoint whose plugin state the plugin refuses (here: the estimator's
+// state written by another plugin) names the plugin; nothing is returned.
+TEST(Checkpoint, PluginStateMismatchNamesThePlugin) {
+  const fs::path dir = scratch("mismatch");
+  const fs::path file = small_checkpoint(dir / "run");
+  StoredMap map = read_map_file(file, "checkpoint");
+  ASSERT_TRUE(map.checkpoint);
+  bool changed = false;
+  for (StoredPluginState& p : map.checkpoint->plugins)
+    if (p.instance == "estimator") {
+      p.plugin = "cekf";
+      changed = true;
+    }
+  ASSERT_TRUE(changed);
+  const fs::path edited = dir / "edited" / "map.bin";
+  write_map_file(edited, map);
+  const std::string e = resume_error(edited);
+  EXPECT_NE(e.find(edited.string()), std::string::npos) << e;
+  EXPECT_NE(e.find("plugin 'ekf'"), std::string::npos) << e;
+  EXPECT_NE(e.find("of plugin 'cekf'"), std::string::npos) << e;
+
+  // A state version the plugin cannot read.
+  map = read_map_file(file, "checkpoint");
+  for (StoredPluginState& p : map.checkpoint->plugins)
+    if (p.instance == "estimator") p.version = 7;
+  write_map_file(edited, map);
+  const std::string v = resume_error(edited);
+  EXPECT_NE(v.find("state version 7"), std::string::npos) << v;
+  EXPECT_NE(v.find("plugin 'ekf'"), std::string::npos) << v;
+}
+
+}  // namespace
