@@ -606,34 +606,37 @@ void Problem::coincide(int a, int b, double sigma) {
   ++loop_closures_;
 }
 
+bool linearize_coincidence(const MapFeature& a, const MapFeature& b, Eigen::VectorXd& r, Eigen::MatrixXd& J,
+                           std::vector<int>& idx) {
+  CoincidenceResidual res;
+  if (!coincidence_residual(shape_for_coincidence(a), shape_for_coincidence(b), PlanarMotion{}, 0.0, res))
+    return false;
+  r = res.r;
+  // A shared coordinate of both features adds its two columns.
+  idx = a.state_idx;
+  for (int row : b.state_idx)
+    if (std::find(idx.begin(), idx.end(), row) == idx.end()) idx.push_back(row);
+  J = Eigen::MatrixXd::Zero(r.size(), static_cast<Eigen::Index>(idx.size()));
+  const auto add = [&](const MapFeature& mf, double sign) {
+    const Eigen::MatrixXd Jf = sign * res.N.transpose() * mf.feature->B_dual();  // eq. 11: δx_f = B̃ δx_p
+    for (std::size_t j = 0; j < mf.state_idx.size(); ++j) {
+      const auto col = std::find(idx.begin(), idx.end(), mf.state_idx[j]) - idx.begin();
+      J.col(col) += Jf.col(static_cast<Eigen::Index>(j));
+    }
+  };
+  add(a, 1.0);
+  add(b, -1.0);
+  return true;
+}
+
 bool Problem::evaluate_coincidence(const Factor& f, FactorLinearization& out) const {
   out = {};
   const MapFeature* a = find_feature(*c_.features, f.feature_id);
   const MapFeature* b = find_feature(*c_.features, f.other_id);
   if (a == nullptr || b == nullptr || a->state_idx.empty() || b->state_idx.empty()) return false;
-  CoincidenceResidual r;
-  if (!coincidence_residual(shape_for_coincidence(*a), shape_for_coincidence(*b), PlanarMotion{}, 0.0, r))
-    return false;
+  if (!linearize_coincidence(*a, *b, out.eta, out.J, out.idx)) return false;
   out.kind = FactorKind::Coincidence;
-  out.eta = r.r;
-  const auto m = r.r.size();
-  out.C = f.sigma * f.sigma * Eigen::MatrixXd::Identity(m, m);
-  // J = Nᵀ (B̃_a  −B̃_b) over the union of both features' rows (a shared
-  // coordinate of both adds its two columns).
-  std::vector<int> idx = a->state_idx;
-  for (int row : b->state_idx)
-    if (std::find(idx.begin(), idx.end(), row) == idx.end()) idx.push_back(row);
-  out.J = Eigen::MatrixXd::Zero(m, static_cast<Eigen::Index>(idx.size()));
-  const auto add = [&](const MapFeature& mf, double sign) {
-    const Eigen::MatrixXd J = sign * r.N.transpose() * mf.feature->B_dual();
-    for (std::size_t j = 0; j < mf.state_idx.size(); ++j) {
-      const auto col = std::find(idx.begin(), idx.end(), mf.state_idx[j]) - idx.begin();
-      out.J.col(col) += J.col(static_cast<Eigen::Index>(j));
-    }
-  };
-  add(*a, 1.0);
-  add(*b, -1.0);
-  out.idx = std::move(idx);
+  out.C = f.sigma * f.sigma * Eigen::MatrixXd::Identity(out.eta.size(), out.eta.size());
   out.robust = false;
   return true;
 }

@@ -50,6 +50,13 @@ namespace mspace::kernel {
 struct MapFeature;
 struct FeatureTypeSlot;
 
+/// The coincidence of features a and b (one object, a loop closure) at their
+/// current coordinates: r = Nᵀ (x_a − x_b) and J = Nᵀ (B̃_a  −B̃_b) over
+/// `idx`, the union of their estimator rows (coincidence_residual,
+/// loop_closing.hpp). False when nothing is left to compare.
+bool linearize_coincidence(const MapFeature& a, const MapFeature& b, Eigen::VectorXd& r, Eigen::MatrixXd& J,
+                           std::vector<int>& idx);
+
 class Problem final : public NonlinearProblem {
  public:
   /// The kernel state the problem reads and moves: the features (by

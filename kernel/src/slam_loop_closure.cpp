@@ -231,26 +231,9 @@ void Slam::close_loops(const DataStep& data) {
     for (const auto& [li, oi] : match.best.pairs) {
       const MapFeature& fa = features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)];
       const MapFeature& fb = features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)];
-      FeatureShape sa = local[static_cast<std::size_t>(li)], sb = old[static_cast<std::size_t>(oi)];
-      sa.cov.resize(0, 0);
-      sb.cov.resize(0, 0);
-      CoincidenceResidual r;
-      if (!coincidence_residual(sa, sb, PlanarMotion{}, 0.0, r)) continue;
       LinearizedObservation ob;
-      ob.eta = r.r;
-      ob.C_eta = kCoincidenceSigma * kCoincidenceSigma * Eigen::MatrixXd::Identity(r.r.size(), r.r.size());
-      ob.idx = fa.state_idx;
-      for (int row : fb.state_idx)
-        if (std::find(ob.idx.begin(), ob.idx.end(), row) == ob.idx.end()) ob.idx.push_back(row);
-      ob.J = Eigen::MatrixXd::Zero(r.r.size(), static_cast<Eigen::Index>(ob.idx.size()));
-      const auto add = [&](const MapFeature& mf, double sign) {
-        const Eigen::MatrixXd J = sign * r.N.transpose() * mf.feature->B_dual();
-        for (std::size_t j = 0; j < mf.state_idx.size(); ++j)
-          ob.J.col(std::find(ob.idx.begin(), ob.idx.end(), mf.state_idx[j]) - ob.idx.begin()) +=
-              J.col(static_cast<Eigen::Index>(j));
-      };
-      add(fa, 1.0);
-      add(fb, -1.0);
+      if (!linearize_coincidence(fa, fb, ob.eta, ob.J, ob.idx)) continue;
+      ob.C_eta = kCoincidenceSigma * kCoincidenceSigma * Eigen::MatrixXd::Identity(ob.eta.size(), ob.eta.size());
       obs.push_back(std::move(ob));
     }
     if (!obs.empty()) {
