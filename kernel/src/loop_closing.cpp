@@ -247,7 +247,7 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
           const Eigen::VectorXd e = res.r + M * t;
           if (m > 2 && e.dot(W.solve(e)) > chi2(m - 2)) continue;
           if (t.norm() <= o.max_translation) vote(t, voter);
-        } else {  // one direction free (e.g. along a wall): a line of translations
+        } else {  // one direction free (a sliding end point): a line of translations
           const Eigen::Vector2d u = es.eigenvectors().col(1), v = es.eigenvectors().col(0);
           const Eigen::Vector2d t0 = -(u.dot(g) / l2) * u;
           const Eigen::VectorXd e = res.r + M * t0;

@@ -14,8 +14,8 @@
 //                   same type) votes for the translations that make the two
 //                   coincide (a Hough transform on a grid of cells): one
 //                   translation when the pair fixes both directions (a
-//                   point), a line of them when it leaves one free (a wall
-//                   whose end points may slide along it);
+//                   point block), a line of them when it leaves one free (a
+//                   line-like feature whose end points may slide along it);
 //   2. verification the strongest cells are refined by Gauss–Newton on the
 //                   three motion parameters with the local features paired
 //                   one to one to their nearest compatible old features,
@@ -32,7 +32,7 @@
 // (mspace/coords.hpp; a rigid motion moves every point block and leaves
 // scalars alone) and its symmetry directions (Feature::symmetry_directions:
 // coordinates that may differ between two copies of the same object, e.g.
-// the unmeasured end points of a wall, which slide). The residual of a pair
+// unmeasured end points that may slide along a line). The residual of a pair
 // is the difference of their coordinates with those directions projected
 // out. The kernel never names a feature type.
 #pragma once

@@ -20,7 +20,7 @@ namespace {
 
 // Inverse sensor model in log-odds, log(p / (1 − p)) (Table 9.1 of
 // Probabilistic Robotics): a hit says 0.7, a miss 0.45, the prior 0.5 is 0.
-// A miss weighs a quarter of a hit: rays that graze a wall at a few degrees
+// A miss weighs a quarter of a hit: rays that graze a surface at a few degrees
 // cross its face cells and would otherwise erase it.
 const float kLogOddsHit = static_cast<float>(std::log(0.7 / 0.3));
 const float kLogOddsMiss = static_cast<float>(std::log(0.45 / 0.55));

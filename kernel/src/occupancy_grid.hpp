@@ -2,7 +2,7 @@
 // format of ROS map_server (grid.pgm + grid.yaml), for navigation stacks
 // (Nav2, move_base) and for looking at the map the way laser-SLAM users do.
 //
-// Generic: the kernel knows nothing of walls or lasers. It keeps every raw
+// Generic: the kernel names no feature type or sensor. It keeps every raw
 // reading that looks like a range scan (two columns, range and bearing, at
 // least kMinScanBeams beams at evenly spaced, increasing bearings — what a
 // scanning range finder delivers; point detections and images do not look

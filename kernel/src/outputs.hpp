@@ -45,7 +45,7 @@ void write_atomically(const std::filesystem::path& file,
                       const std::function<void(const std::filesystem::path& temporary)>& write);
 
 /// The trajectory as the run goes: poses are appended to
-/// "trajectory.partial.tum" and flushed at least every `flush_seconds` of wall
+/// "trajectory.partial.tum" and flushed at least every `flush_seconds` of clock
 /// time, so a killed run loses at most that. These are the poses as estimated
 /// at each step (a smoother may correct them later); the complete run writes
 /// trajectory.tum and removes the partial file.

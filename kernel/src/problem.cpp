@@ -522,17 +522,6 @@ void Problem::retract(const Eigen::VectorXd& delta) {
 
 namespace {
 
-/// A feature as loop_closing.hpp compares it (no covariance: the factor's
-/// own σ stands for it).
-FeatureShape shape_for_coincidence(const MapFeature& mf) {
-  FeatureShape s;
-  s.layout = &mf.feature->layout();
-  s.x = mf.feature->coords();
-  s.free = mf.feature->symmetry_directions();
-  if (s.free.cols() == 0) s.free = Eigen::MatrixXd::Zero(s.x.size(), 0);
-  return s;
-}
-
 const MapFeature* find_feature(const std::vector<MapFeature>& features, int id) {
   for (const MapFeature& mf : features)
     if (mf.id == id) return &mf;
@@ -606,10 +595,20 @@ void Problem::coincide(int a, int b, double sigma) {
   ++loop_closures_;
 }
 
+FeatureShape feature_shape(const MapFeature& mf) {
+  FeatureShape s;
+  s.type = mf.type;
+  s.layout = &mf.feature->layout();
+  s.x = mf.feature->coords();
+  s.free = mf.feature->symmetry_directions();
+  if (s.free.cols() == 0) s.free = Eigen::MatrixXd::Zero(s.x.size(), 0);
+  return s;
+}
+
 bool linearize_coincidence(const MapFeature& a, const MapFeature& b, Eigen::VectorXd& r, Eigen::MatrixXd& J,
                            std::vector<int>& idx) {
   CoincidenceResidual res;
-  if (!coincidence_residual(shape_for_coincidence(a), shape_for_coincidence(b), PlanarMotion{}, 0.0, res))
+  if (!coincidence_residual(feature_shape(a), feature_shape(b), PlanarMotion{}, 0.0, res))
     return false;
   r = res.r;
   // A shared coordinate of both features adds its two columns.

@@ -50,6 +50,10 @@ namespace mspace::kernel {
 struct MapFeature;
 struct FeatureTypeSlot;
 
+/// A feature as map matching sees it (loop_closing.hpp): type, layout, x_f and
+/// its symmetry directions; no covariance.
+FeatureShape feature_shape(const MapFeature& mf);
+
 /// The coincidence of features a and b (one object, a loop closure) at their
 /// current coordinates: r = Nᵀ (x_a − x_b) and J = Nᵀ (B̃_a  −B̃_b) over
 /// `idx`, the union of their estimator rows (coincidence_residual,

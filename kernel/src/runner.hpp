@@ -33,7 +33,7 @@ struct RunResult {
   RunSummary summary;
   int checkpoints = 0;                 ///< checkpoints written
   std::uintmax_t checkpoint_bytes = 0;  ///< size of the last one
-  double checkpoint_seconds = 0.0;      ///< wall time of writing them all
+  double checkpoint_seconds = 0.0;      ///< elapsed (clock) time of writing them all
   std::filesystem::path output_dir;
   int stop_signal = 0;  ///< the signal that interrupted the run, 0 if none
   std::vector<std::string> files;  ///< the output files written (names in output_dir)

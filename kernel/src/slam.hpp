@@ -51,7 +51,7 @@ struct MapFeature : FeatureBookkeeping {
 };
 
 /// A coordinate block common to several features (T-RO §VI), e.g. the corner
-/// of two walls: one set of estimator rows that every member's B̃ maps with
+/// of two line features: one set of estimator rows that every member's B̃ maps with
 /// the identity (eq. 33).
 struct SharedCoordinate {
   int id = 0;

@@ -8,7 +8,7 @@
 //              loop_local_path metres of travel;
 //   old map    features in the estimator created more than
 //              loop_min_gap_path metres ago (some may be tracked again
-//              already: a re-entry often re-associates a wall or two before
+//              already: a re-entry often re-associates a feature or two before
 //              the duplicates give the place away);
 //   window     3σ of the robot's position and heading plus the drift the
 //              odometry may have had since the robot last matched a feature
@@ -152,13 +152,8 @@ void Slam::close_loops(const DataStep& data) {
 
   const auto shape = [&](int i) {
     const MapFeature& mf = features_[static_cast<std::size_t>(i)];
-    FeatureShape s;
+    FeatureShape s = feature_shape(mf);
     s.feature = i;
-    s.type = mf.type;
-    s.layout = &mf.feature->layout();
-    s.x = mf.feature->coords();
-    s.free = mf.feature->symmetry_directions();
-    if (s.free.cols() == 0) s.free = Eigen::MatrixXd::Zero(s.x.size(), 0);
     const Eigen::MatrixXd Bt = mf.feature->B_dual();  // eq. 11: δx_f = B̃ δx_p
     s.cov = Bt * estimator_->marginal(mf.state_idx) * Bt.transpose();
     return s;
