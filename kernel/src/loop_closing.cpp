@@ -185,6 +185,11 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
   MapMatchOptions o = options;
   o.max_translation *= std::max(1.0, options.rival_window_factor);
   o.max_rotation = std::min(std::numbers::pi, o.max_rotation * std::max(1.0, options.rival_window_factor));
+  // A wide window is searched on a coarser grid, so that a search costs at
+  // most ~81² cells × 61 angles whatever the drift allowance (the grid's
+  // half steps enter the first pairing as uncertainty, below).
+  o.cell = std::max(o.cell, o.max_translation / 40.0);
+  o.rotation_step = std::max(o.rotation_step, o.max_rotation / 30.0);
   Chi2Table chi2(o.probability);
 
   // Candidate partners: same type and close enough for some motion in the window.
