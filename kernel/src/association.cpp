@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <sstream>
@@ -565,6 +566,20 @@ void Associator::features_in_range(const AssociationView& map, const SensorSlot&
   std::sort(out.begin(), out.end());
 }
 
+const Eigen::MatrixXd& Associator::KeptProduct::of(const Eigen::MatrixXd& J, const Eigen::MatrixXd& X,
+                                                    Eigen::MatrixXd& scratch) {
+  const auto same_bits = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+    return a.rows() == b.rows() && a.cols() == b.cols() &&
+           std::memcmp(a.data(), b.data(), static_cast<std::size_t>(a.size()) * sizeof(double)) == 0;
+  };
+  if (valid && same_bits(J, factor)) return product;
+  factor = J;
+  scratch.noalias() = J * X;  // J X Jᵀ with the left product evaluated into kept storage
+  product.noalias() = scratch * J.transpose();
+  valid = true;
+  return product;
+}
+
 // Gating (ICRA §IV, "Prediction"). For each feature the sensor feeds within
 // its range, the state part of the innovation covariance is computed once per
 // reading in sensor-frame coordinates,
@@ -581,18 +596,34 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   std::vector<double> closest(meas.size(), kInf);
   const Eigen::Vector2d sensor_xy(x_ms[kX], x_ms[kY]);
   features_in_range(map, sensor, sensor_xy, in_range_);
+  // The per-feature matrices below live in members and keep their storage
+  // from feature to feature and reading to reading (this loop runs for every
+  // feature in range of every reading); the products are the same
+  // expressions, evaluated into them instead of into temporaries.
+  Eigen::MatrixXd& J_of = scratch_J_of_;
+  Eigen::MatrixXd& J_os = scratch_J_os_;
+  Eigen::MatrixXd& A = scratch_A_;
+  Eigen::MatrixXd& M = scratch_M_;
+  std::vector<int>& idx = scratch_idx_;
+  // The two products of eq. 29 per pair, J_ηv C_v J_ηvᵀ and J_ηo M J_ηoᵀ,
+  // are kept with their factors and recomputed only when a factor's bits
+  // changed: a J_ηo that depends on the feature alone (a pole's, a point's)
+  // serves every measurement of the reading, and an extractor whose J_ηv is
+  // the same for every feature (η = h − v: −I) makes one C_η per measurement.
+  // Same inputs, same operations: the same numbers as computing them afresh.
+  if (measurement_products_.size() < meas.size()) measurement_products_.resize(meas.size());
+  for (KeptProduct& kept : measurement_products_) kept.valid = false;
   for (int fi : in_range_) {
     const MapFeature& mf = map.features[fi];
     const FeatureTypeSlot& type = map.types[mf.type];
     const Feature& f = *mf.feature;
     const CoordLayout& layout = f.layout();
-    Eigen::MatrixXd J_of, J_os;
     const Eigen::VectorXd x_o = to_sensor_frame(layout, f.coords(), x_ms, &J_of, &J_os);  // eqs. 7–9, 18
 
     const int dim = f.mspace_dim();
-    Eigen::MatrixXd A(layout.size(), k + dim);
-    A.leftCols(k) = J_os * J_sr;
-    std::vector<int> idx = map.robot_idx;
+    A.resize(layout.size(), k + dim);
+    A.leftCols(k).noalias() = J_os * J_sr;
+    idx.assign(map.robot_idx.begin(), map.robot_idx.end());
     if (dim > 0) {
       const Eigen::MatrixXd Bd = guarded(type.instance, *type.library, "B_dual", [&] { return f.B_dual(); });
       if (Bd.rows() != layout.size() || Bd.cols() != dim)
@@ -600,13 +631,15 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
                           std::to_string(Bd.rows()) + "x" + std::to_string(Bd.cols()) + ", expected " +
                           std::to_string(layout.size()) + "x" + std::to_string(dim));
       require_finite(Bd, "B_dual", type.instance, *type.library);
-      A.rightCols(dim) = J_of * Bd;
+      A.rightCols(dim).noalias() = J_of * Bd;
       idx.insert(idx.end(), mf.state_idx.begin(), mf.state_idx.end());
     }
-    Eigen::MatrixXd M = A * map.estimator.marginal(idx) * A.transpose();
+    scratch_AP_.noalias() = A * map.estimator.marginal(idx);
+    M.noalias() = scratch_AP_ * A.transpose();
     const Eigen::MatrixXd gate_cov =
         guarded(type.instance, *type.library, "gating_covariance", [&] { return f.gating_covariance(); });
     if (gate_cov.size() > 0) M += J_of * gate_cov * J_of.transpose();
+    feature_product_.valid = false;  // M is this feature's
 
     for (std::size_t mi = 0; mi < meas.size(); ++mi) {
       // The scratch objects keep their storage from pair to pair: this loop
@@ -623,11 +656,9 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
       require_finite(in.eta, "innovation", type.instance, *type.library);
       require_finite(in.J_eta_o, "J_eta_o", type.instance, *type.library);
       require_finite(in.J_eta_v, "J_eta_v", type.instance, *type.library);
-      Eigen::MatrixXd& C_eta = scratch_C_eta_;
+      const Eigen::MatrixXd& C_eta = measurement_products_[mi].of(in.J_eta_v, meas[mi].C_v, scratch_T_);
       Eigen::MatrixXd& S = scratch_S_;
-      C_eta.noalias() = in.J_eta_v * meas[mi].C_v * in.J_eta_v.transpose();
-      S.noalias() = in.J_eta_o * M * in.J_eta_o.transpose();  // eq. 29
-      S += C_eta;
+      S = feature_product_.of(in.J_eta_o, M, scratch_T_) + C_eta;  // eq. 29
       const int mi_dim = static_cast<int>(m);
       // Most pairs are far apart: d² = ηᵀS⁻¹η ≥ |η|²/λ_max(S) ≥ |η|²/trace(S),
       // so when that bound is beyond both thresholds the pair can neither be

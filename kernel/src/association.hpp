@@ -231,9 +231,21 @@ class Associator {
   std::unordered_map<int, int> position_;  ///< feature id → position, as of the last sync
   bool dirty_ = true;
   std::vector<int> in_range_, keys_;
-  // Reused for every (feature, measurement) pair.
+  // Reused for every feature in range (J_of, J_os, A, A P, M and the
+  // estimator rows) and every (feature, measurement) pair (the rest).
+  Eigen::MatrixXd scratch_J_of_, scratch_J_os_, scratch_A_, scratch_AP_, scratch_M_;
+  std::vector<int> scratch_idx_;
   Innovation scratch_innovation_;
-  Eigen::MatrixXd scratch_C_eta_, scratch_S_;
+  Eigen::MatrixXd scratch_T_, scratch_S_;
+  /// J X Jᵀ for the J it was last computed with (`of` recomputes it when J's
+  /// bits differ; X is the caller's to keep fixed while `valid`).
+  struct KeptProduct {
+    Eigen::MatrixXd factor, product;
+    bool valid = false;
+    const Eigen::MatrixXd& of(const Eigen::MatrixXd& J, const Eigen::MatrixXd& X, Eigen::MatrixXd& scratch);
+  };
+  std::vector<KeptProduct> measurement_products_;  ///< J_ηv C_v J_ηvᵀ, per measurement of the reading
+  KeptProduct feature_product_;                    ///< J_ηo M J_ηoᵀ of the feature in hand
   Eigen::LDLT<Eigen::MatrixXd> scratch_ldlt_;
 };
 

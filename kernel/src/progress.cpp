@@ -10,20 +10,20 @@ Progress::Progress(std::size_t total, bool enabled)
   start_ = last_draw_ = std::chrono::steady_clock::now();
 }
 
-void Progress::update(std::size_t done, const std::string& status) {
+void Progress::update(std::size_t done, const std::function<std::string()>& status) {
   if (!enabled_) return;
   const auto now = std::chrono::steady_clock::now();
   if (tty_) {
     if (now - last_draw_ < std::chrono::milliseconds(100)) return;
     last_draw_ = now;
-    draw(done, status, false);
+    draw(done, status(), false);
     return;
   }
   if (total_ == 0) return;
   const int decile = static_cast<int>(10 * done / total_);
   if (decile == last_decile_) return;
   last_decile_ = decile;
-  draw(done, status, false);
+  draw(done, status(), false);
 }
 
 void Progress::finish(std::size_t done, const std::string& status) {

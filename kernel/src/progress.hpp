@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstddef>
+#include <functional>
 #include <string>
 
 namespace mspace::kernel {
@@ -12,8 +13,9 @@ class Progress {
  public:
   /// total = 0 when the number of steps is unknown.
   Progress(std::size_t total, bool enabled);
-  /// Called after every step; redraws at most ~10 times a second.
-  void update(std::size_t done, const std::string& status);
+  /// Called after every step; redraws at most ~10 times a second. `status`
+  /// is asked for only when the line is drawn (it may look at the whole map).
+  void update(std::size_t done, const std::function<std::string()>& status);
   /// Final redraw and newline.
   void finish(std::size_t done, const std::string& status);
 

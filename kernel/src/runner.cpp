@@ -145,7 +145,7 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
   try {
     while (slam.step()) {
       ++done;
-      progress.update(static_cast<std::size_t>(slam.steps_done()), status_line(slam));
+      progress.update(static_cast<std::size_t>(slam.steps_done()), [&] { return status_line(slam); });
       if (stream) stream->append(slam.trajectory());
       if (options.after_step) options.after_step(done);
       if (signals && signals->signal() != 0) {

@@ -459,10 +459,16 @@ void Slam::apply_correction(const Eigen::VectorXd& dx) {
   for (std::size_t i = 0; i < dofs_.size(); ++i) x_r_[dofs_[i]] += dx[static_cast<Eigen::Index>(i)];
   for (int a = kTheta; a <= kPsi; ++a) x_r_[a] = wrap_angle(x_r_[a]);
   if (problem_) problem_->moved(dx);
+  // One δx_p vector per M-space dimension, reused from feature to feature:
+  // this loop visits every feature in the estimator after every update.
+  std::vector<Eigen::VectorXd> by_dim;
   for (MapFeature& mf : features_) {  // eq. 24: x_f += B̃ δx_p
     if (mf.state_idx.empty()) continue;
-    Eigen::VectorXd dx_p(static_cast<Eigen::Index>(mf.state_idx.size()));
-    for (std::size_t j = 0; j < mf.state_idx.size(); ++j) dx_p[static_cast<Eigen::Index>(j)] = dx[mf.state_idx[j]];
+    const std::size_t dim = mf.state_idx.size();
+    if (by_dim.size() <= dim) by_dim.resize(dim + 1);
+    Eigen::VectorXd& dx_p = by_dim[dim];
+    dx_p.resize(static_cast<Eigen::Index>(dim));
+    for (std::size_t j = 0; j < dim; ++j) dx_p[static_cast<Eigen::Index>(j)] = dx[mf.state_idx[j]];
     const FeatureTypeSlot& type = types_[mf.type];
     guarded(type.instance, *type.library, "apply_perturbation", [&] { mf.feature->apply_perturbation(dx_p); });
   }

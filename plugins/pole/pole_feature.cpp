@@ -87,6 +87,13 @@ Eigen::MatrixXd PoleFeature::B() const { return Eigen::MatrixXd::Identity(mdim_,
 
 Eigen::MatrixXd PoleFeature::B_dual() const { return Eigen::MatrixXd::Identity(kDim, mdim_); }
 
+void PoleFeature::apply_perturbation(const Eigen::VectorXd& dx_p) {
+  if (dx_p.size() != mdim_)
+    throw std::invalid_argument("pole: apply_perturbation got " + std::to_string(dx_p.size()) +
+                                " values for M-space dimension " + std::to_string(mdim_));
+  x_.head(mdim_) += dx_p;
+}
+
 // eq. 16: η(x_o, v) = h(x_o) − v, so J_ηo = ∂h/∂x_o and J_ηv = −I.
 bool PoleFeature::innovation(const Eigen::VectorXd& x_o, const Measurement& m,
                              Innovation& out) const {

@@ -79,6 +79,9 @@ class PoleFeature : public Feature {
   /// dim 3: B = B̃ = I₃ (§IV-H); dim 0: 0×3 and 3×0.
   Eigen::MatrixXd B() const override;
   Eigen::MatrixXd B_dual() const override;
+  /// eq. 24, x_f += B̃ δx_p, with B̃ = I: the same numbers without building B̃
+  /// (the kernel applies every update to every feature).
+  void apply_perturbation(const Eigen::VectorXd& dx_p) override;
 
   /// eq. 16: η = h(x_o) − v with the bearing wrapped to (−π, π];
   /// J_ηo = ∂h/∂x_o, J_ηv = −I. False for another kind, a malformed

@@ -252,12 +252,21 @@ TEST_F(SimRun, TheCommandLineExitsWith143OnSigtermAndWritesTheOutputs) {
           "--plugin-dir", MSPACE_PLUGIN_DIR, static_cast<char*>(nullptr));
     _exit(98);
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  // The handlers are installed when the run starts stepping, just before
+  // trajectory.partial.tum is created: wait for that file (starting up —
+  // loading plugins, reading the configuration — can take seconds on a
+  // loaded machine, and a SIGTERM before the handlers would end the process
+  // by the default action), then let the run go on for a while.
+  const auto started = std::chrono::steady_clock::now();
+  while (!std::filesystem::exists(out_ / "trajectory.partial.tum") &&
+         std::chrono::steady_clock::now() - started < std::chrono::seconds(60))
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
   kill(pid, SIGTERM);
   int status = 0;
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
   ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 143) << "60 laps must take longer than 1.5 s";
+  EXPECT_EQ(WEXITSTATUS(status), 143) << "60 laps must outlast the start-up and the 0.5 s after it";
   const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
   const std::string interrupted = summary["interrupted"].as<std::string>();
   EXPECT_NE(interrupted.find("(SIGTERM)"), std::string::npos) << interrupted;
