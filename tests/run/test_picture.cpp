@@ -12,7 +12,7 @@ namespace {
 /// A 10 m × 10 m view, 20 px per metre, on a white image.
 struct Canvas {
   View view{0.0, 0.0, 20.0, 240, 20};
-  cv::Mat img{240, 240, CV_8UC3, cv::Scalar(255, 255, 255)};
+  cv::Mat img = cv::Mat(240, 240, CV_8UC3, cv::Scalar(255, 255, 255));
   /// Whether anything was drawn within 1 px of map point (x, y).
   bool inked(double x, double y) const {
     const cv::Point p = view.px(x, y);
