@@ -110,13 +110,24 @@ int run_check(const CheckCommand& command, PluginRegistry& registry, std::ostrea
     conformance::print_report(reports.back(), out);
     failed += reports.back().passed() ? 0 : 1;
   }
+  // The extractor ↔ feature contract of every extractor with every feature
+  // type among the targets (`mspace check EXTRACTOR.so FEATURE.so`).
+  for (std::size_t e = 0; e < plugins.size(); ++e) {
+    if (!plugins[e] || plugins[e]->descriptor->kind != PluginKind::Extractor) continue;
+    for (std::size_t f = 0; f < plugins.size(); ++f) {
+      if (!plugins[f] || plugins[f]->descriptor->kind != PluginKind::Feature) continue;
+      reports.push_back(conformance::check_pair(*plugins[e]->descriptor, *plugins[f]->descriptor, options));
+      conformance::print_report(reports.back(), out);
+      failed += reports.back().passed() ? 0 : 1;
+    }
+  }
   if (!command.junit_file.empty()) {
     std::ofstream junit(command.junit_file);
     if (!junit) throw std::runtime_error("cannot write " + command.junit_file);
     conformance::write_junit(reports, junit);
   }
-  out << (failed == 0 ? "all " + std::to_string(reports.size()) + " plugin(s) passed\n"
-                      : std::to_string(failed) + " of " + std::to_string(reports.size()) + " plugin(s) FAILED\n");
+  out << (failed == 0 ? "all " + std::to_string(reports.size()) + " report(s) passed\n"
+                      : std::to_string(failed) + " of " + std::to_string(reports.size()) + " report(s) FAILED\n");
   return failed == 0 ? 0 : 1;
 }
 

@@ -121,7 +121,8 @@ struct Item {
 /// or one section and reports problems through fail().
 class Reader {
  public:
-  Reader(std::string file, PluginRegistry& registry) : file_(std::move(file)), registry_(registry) {}
+  Reader(std::string file, PluginRegistry& registry, std::vector<std::string> overrides = {})
+      : file_(std::move(file)), registry_(registry), overrides_(std::move(overrides)) {}
 
   RunConfig read_document(const YAML::Node& root);
 
@@ -138,8 +139,14 @@ class Reader {
   static const Item* find(const std::vector<Item>& fields, const std::string& name);
   const Item& need(const Item& map, const std::vector<Item>& fields, const std::string& name) const;
 
-  // Scalars and lists of scalars.
+  // Scalars and lists of scalars. Every scalar may name environment
+  // variables, ${VAR} or ${VAR:-default} (expand_env_vars): a number, an
+  // integer or a bool is read from the expanded text.
   std::string text(const Item& item) const;
+  /// The item's node, or a scalar node of its expanded text when it names a variable.
+  YAML::Node scalar(const Item& item) const;
+  /// 'expanded' (from '${VAR}') when the text was expanded, else 'text'.
+  static std::string describe_scalar(const Item& item, const YAML::Node& value);
   double number(const Item& item, double min = -kInf, double max = kInf) const;
   std::int64_t integer(const Item& item, double min = -kInf, double max = kInf) const;
   bool boolean(const Item& item) const;
@@ -165,13 +172,29 @@ class Reader {
   OutputConfig read_output(const Item* item, const std::string& run_name) const;
   EvaluationConfig read_evaluation(const Item* item, const std::vector<SensorConfig>& sensors) const;
 
+  /// The --set assignment that gave `key` (or a map above it), or nullptr.
+  const std::string* override_of(const std::string& key) const;
+
   std::string file_;
   PluginRegistry& registry_;
+  std::vector<std::string> overrides_;  ///< "dotted.key=value", as given on the command line
 };
+
+const std::string* Reader::override_of(const std::string& key) const {
+  for (const std::string& o : overrides_) {
+    const std::string k = o.substr(0, o.find('='));
+    if (key == k || key.starts_with(k + ".") || key.starts_with(k + "[")) return &o;
+  }
+  return nullptr;
+}
 
 void Reader::fail(const YAML::Mark& mark, const std::string& key, const std::string& problem) const {
   std::ostringstream os;
-  os << file_ << ':' << std::max(mark.line, 0) + 1 << ':' << std::max(mark.column, 0) + 1 << ": ";
+  // A value from the command line is named by its --set, not by a place in the file.
+  if (const std::string* o = key.empty() ? nullptr : override_of(key))
+    os << "--set " << *o << ": ";
+  else
+    os << file_ << ':' << std::max(mark.line, 0) + 1 << ':' << std::max(mark.column, 0) + 1 << ": ";
   if (!key.empty()) os << key << ": ";
   os << problem;
   throw ConfigError(os.str());
@@ -226,16 +249,33 @@ std::string Reader::text(const Item& item) const {
   }
 }
 
+YAML::Node Reader::scalar(const Item& item) const {
+  if (!item.node.IsScalar() || item.node.Scalar().find("${") == std::string::npos) return item.node;
+  try {
+    return YAML::Node(expand_env_vars(item.node.Scalar()));
+  } catch (const std::invalid_argument& e) {
+    fail(item, e.what());
+  }
+}
+
+std::string Reader::describe_scalar(const Item& item, const YAML::Node& value) {
+  if (value.IsScalar() && item.node.IsScalar() && value.Scalar() != item.node.Scalar())
+    return describe(value) + " (from " + describe(item.node) + ")";
+  return describe(value);
+}
+
 double Reader::number(const Item& item, double min, double max) const {
-  const std::optional<double> v = convert<double>(item.node);
-  if (!v) fail(item, "expected a number, got " + describe(item.node));
+  const YAML::Node value = scalar(item);
+  const std::optional<double> v = convert<double>(value);
+  if (!v) fail(item, "expected a number, got " + describe_scalar(item, value));
   if (!(*v >= min && *v <= max)) fail(item, format_number(*v) + " is out of range " + format_range(min, max));
   return *v;
 }
 
 std::int64_t Reader::integer(const Item& item, double min, double max) const {
-  const std::optional<std::int64_t> v = convert<std::int64_t>(item.node);
-  if (!v) fail(item, "expected an integer, got " + describe(item.node));
+  const YAML::Node value = scalar(item);
+  const std::optional<std::int64_t> v = convert<std::int64_t>(value);
+  if (!v) fail(item, "expected an integer, got " + describe_scalar(item, value));
   const auto as_double = static_cast<double>(*v);
   if (!(as_double >= min && as_double <= max))
     fail(item, std::to_string(*v) + " is out of range " + format_range(min, max));
@@ -243,8 +283,9 @@ std::int64_t Reader::integer(const Item& item, double min, double max) const {
 }
 
 bool Reader::boolean(const Item& item) const {
-  const std::optional<bool> v = convert<bool>(item.node);
-  if (!v) fail(item, "expected true or false, got " + describe(item.node));
+  const YAML::Node value = scalar(item);
+  const std::optional<bool> v = convert<bool>(value);
+  if (!v) fail(item, "expected true or false, got " + describe_scalar(item, value));
   return *v;
 }
 
@@ -715,7 +756,51 @@ std::string expand_env_vars(const std::string& text) {
   return out;
 }
 
-RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry) {
+namespace {
+
+/// Sets root's `dotted.key` to `value` (YAML text) for one --set assignment,
+/// creating the maps on the way. The value is then read and checked with the
+/// rest of the document.
+void apply_override(YAML::Node& root, const std::string& assignment) {
+  const std::size_t eq = assignment.find('=');
+  const auto bad = [&](const std::string& why) { throw ConfigError("--set " + assignment + ": " + why); };
+  if (eq == std::string::npos || eq == 0) bad("expected KEY=VALUE, e.g. features.points.min_observations=5");
+  const std::string key = assignment.substr(0, eq);
+  std::vector<std::string> parts;
+  for (std::size_t start = 0;;) {
+    const std::size_t dot = key.find('.', start);
+    parts.push_back(key.substr(start, dot == std::string::npos ? std::string::npos : dot - start));
+    if (dot == std::string::npos) break;
+    start = dot + 1;
+  }
+  YAML::Node value;
+  try {
+    value = YAML::Load(assignment.substr(eq + 1));
+  } catch (const YAML::ParserException& e) {
+    bad("the value is not valid YAML: " + e.msg);
+  }
+  if (!root.IsMap() && !root.IsNull()) bad("the configuration is not a map of sections");
+  // YAML::Node is a handle and its operator= writes through it: walk by
+  // copy-constructing a fresh handle per level, never by reassigning one.
+  std::vector<YAML::Node> path{root};
+  for (std::size_t i = 0; i + 1 < parts.size(); ++i) {
+    if (parts[i].empty()) bad("empty key component in '" + key + "'");
+    YAML::Node parent = path.back();
+    const YAML::Node child = parent[parts[i]];
+    if (!child.IsDefined() || child.IsNull())
+      parent[parts[i]] = YAML::Node(YAML::NodeType::Map);
+    else if (!child.IsMap())
+      bad("'" + parts[i] + "' is " + describe(child) + ", not a map of keys");
+    path.push_back(parent[parts[i]]);
+  }
+  if (parts.back().empty()) bad("empty key component in '" + key + "'");
+  path.back()[parts.back()] = value;
+}
+
+}  // namespace
+
+RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry,
+                       const std::vector<std::string>& overrides) {
   YAML::Node root;
   try {
     root = YAML::Load(text);
@@ -723,10 +808,12 @@ RunConfig parse_config(const std::string& text, const std::string& file_name_for
     throw ConfigError(file_name_for_messages + ":" + std::to_string(e.mark.line + 1) + ":" +
                       std::to_string(e.mark.column + 1) + ": YAML syntax error: " + e.msg);
   }
-  return Reader(file_name_for_messages, registry).read_document(root);
+  for (const std::string& o : overrides) apply_override(root, o);
+  return Reader(file_name_for_messages, registry, overrides).read_document(root);
 }
 
-RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry) {
+RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry,
+                      const std::vector<std::string>& overrides) {
   std::error_code ec;
   const auto status = std::filesystem::status(file, ec);
   if (!std::filesystem::exists(status)) throw ConfigError(file.string() + ": no such file");
@@ -736,7 +823,7 @@ RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registr
   if (!in) throw ConfigError(file.string() + ": cannot read the configuration file (permissions?)");
   std::ostringstream text;
   text << in.rdbuf();
-  return parse_config(text.str(), file.string(), registry);
+  return parse_config(text.str(), file.string(), registry, overrides);
 }
 
 void override_estimator(RunConfig& config, const std::string& plugin, PluginRegistry& registry) {

@@ -27,8 +27,8 @@
 //   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>}
 //
 // Plugin parameters are checked against the plugin's descriptor (loaded
-// through the registry) and completed with their defaults. String values may
-// use ${VAR} and ${VAR:-default}. Every problem is a ConfigError
+// through the registry) and completed with their defaults. Any scalar value
+// (string, number, integer, bool) may use ${VAR} and ${VAR:-default}. Every problem is a ConfigError
 // "<file>:<line>:<col>: <dotted.key>: <problem>". Angles are stored in radians.
 // Relative directories (output.dir, run.plugin_path) are relative to the
 // working directory; data paths inside plugin parameters are the plugins'.
@@ -172,11 +172,17 @@ struct RunConfig {
 
 /// Reads and validates a run file. Directories of run.plugin_path are added to
 /// `registry`, and the plugins the run names are loaded to check parameters.
-RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry);
+/// `overrides` are the command line's --set assignments, "dotted.key=VALUE"
+/// (VALUE is YAML: 5, true, [1, 2], text), applied over the file before it is
+/// read: any key, plugin parameters included, checked like the file's own
+/// values; a problem with one names its --set instead of a file position.
+RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry,
+                      const std::vector<std::string>& overrides = {});
 
 /// Same, from text; `file_name_for_messages` prefixes every error message and
 /// its stem is the default run name.
-RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry);
+RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry,
+                       const std::vector<std::string>& overrides = {});
 
 /// The fully resolved configuration (every parameter with its effective value)
 /// as YAML text in the run-file layout; parse_config accepts it back.

@@ -1,10 +1,12 @@
 // mspace — the command line tool.
 //
-//   mspace run [CONFIG] [--out DIR]   a SLAM run (the built-in simulated world without CONFIG)
+//   mspace run [CONFIG] [--out DIR]   a SLAM run (the built-in simulated world without CONFIG);
+//              [--set KEY=VALUE]...   any configuration key overridden (also for `mspace config`)
 //   mspace run --resume DIR           continues a run from its checkpoint
 //   mspace plugins                    every plugin found, with kind, ABI tag and parameters
 //   mspace config [CONFIG]            the fully resolved configuration
-//   mspace check PLUGIN... [--junit F] the plugin conformance suite (files or names)
+//   mspace check PLUGIN... [--junit F] the plugin conformance suite (files or names); with an
+//                                     extractor and a feature type also their pair check
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
@@ -48,13 +50,14 @@ void setup_registry(PluginRegistry& registry, const CommonOptions& o) {
   for (const auto& file : o.plugin_files) registry.add_plugin_file(file);
 }
 
-RunConfig load(const std::string& file, PluginRegistry& registry) {
-  if (file.empty()) return parse_config(default_config_text(), default_config_name(), registry);
-  return load_config(file, registry);
+RunConfig load(const std::string& file, PluginRegistry& registry, const std::vector<std::string>& overrides) {
+  if (file.empty()) return parse_config(default_config_text(), default_config_name(), registry, overrides);
+  return load_config(file, registry, overrides);
 }
 
 struct RunCommand {
   std::string file, out, estimator, resume;
+  std::vector<std::string> sets;  ///< --set KEY=VALUE overrides of the configuration
   long long max_steps = 0;
   std::optional<long long> seed, checkpoint_every;
   bool quiet = false;
@@ -80,9 +83,10 @@ int run_and_report(Slam& slam, bool quiet) {
 /// `mspace run --resume DIR`: the configuration is the checkpoint's; only the
 /// output folder, the step limit and the checkpoint interval may change.
 int cmd_resume(const RunCommand& c, const CommonOptions& common) {
-  if (!c.file.empty() || c.seed || !c.estimator.empty())
-    throw ConfigError("--resume takes the configuration from the checkpoint: give no CONFIG, --seed or --estimator "
-                      "(only --out, --max-steps, --checkpoint-every and --log-level)");
+  if (!c.file.empty() || c.seed || !c.estimator.empty() || !c.sets.empty())
+    throw ConfigError(
+        "--resume takes the configuration from the checkpoint: give no CONFIG, --seed, --set or --estimator "
+        "(only --out, --max-steps, --checkpoint-every and --log-level)");
   PluginRegistry registry;
   setup_registry(registry, common);
   std::unique_ptr<Slam> slam = resume_from_checkpoint(c.resume, registry, [&](RunConfig& config) {
@@ -101,7 +105,7 @@ int cmd_run(const RunCommand& c, const CommonOptions& common) {
   const std::string& file = c.file;
   PluginRegistry registry;
   setup_registry(registry, common);
-  RunConfig config = load(file, registry);
+  RunConfig config = load(file, registry, c.sets);
   for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
   set_log_level(parse_log_level(common.log_level.empty() ? config.log_level : common.log_level));
   if (!c.out.empty()) config.output.dir = c.out;
@@ -157,10 +161,10 @@ int cmd_plugins(const CommonOptions& common) {
   return errors.empty() ? 0 : 1;
 }
 
-int cmd_config(const std::string& file, const CommonOptions& common) {
+int cmd_config(const std::string& file, const std::vector<std::string>& sets, const CommonOptions& common) {
   PluginRegistry registry;
   setup_registry(registry, common);
-  RunConfig config = load(file, registry);
+  RunConfig config = load(file, registry, sets);
   apply_run_seed(config);
   std::cout << effective_config_yaml(config);
   return 0;
@@ -222,6 +226,9 @@ int main(int argc, char** argv) {
   run->add_option("--resume", run_cmd.resume,
                   "continue the run saved in this checkpoint (a checkpoint folder, or a run's output folder); the "
                   "configuration is the checkpoint's");
+  run->add_option("--set", run_cmd.sets,
+                  "KEY=VALUE: override any configuration key, plugin parameters included, e.g. "
+                  "features.points.min_observations=5 (repeatable; checked like the file's values)");
   run->add_flag("--quiet", run_cmd.quiet, "no progress output");
   add_common(run, common);
 
@@ -231,11 +238,16 @@ int main(int argc, char** argv) {
   std::string config_file;
   CLI::App* config = app.add_subcommand("config", "print the fully resolved configuration");
   config->add_option("config", config_file, "YAML run configuration (the built-in one without)");
+  std::vector<std::string> config_sets;
+  config->add_option("--set", config_sets, "KEY=VALUE: override any configuration key (repeatable)");
   add_common(config, common);
 
   CheckCommand check_cmd;
   CLI::App* check = app.add_subcommand("check", "run the conformance suite on plugin files or names");
-  check->add_option("plugins", check_cmd.targets, "plugin library files or registered names")->required();
+  check->add_option("plugins", check_cmd.targets,
+                    "plugin library files or registered names; each extractor is also checked with each feature "
+                    "type given (their measurement conventions against true geometry)")
+      ->required();
   check->add_option("--junit", check_cmd.junit_file, "also write JUnit XML to this file");
   check->add_option("--samples", check_cmd.samples, "random samples per check")->check(CLI::PositiveNumber);
   check->add_option("--seed", check_cmd.seed, "base seed of the samples");
@@ -250,7 +262,7 @@ int main(int argc, char** argv) {
   try {
     if (run->parsed()) return cmd_run(run_cmd, common);
     if (plugins->parsed()) return cmd_plugins(common);
-    if (config->parsed()) return cmd_config(config_file, common);
+    if (config->parsed()) return cmd_config(config_file, config_sets, common);
     if (check->parsed()) {
       PluginRegistry registry;
       setup_registry(registry, common);

@@ -1,8 +1,10 @@
 // picture.cpp — a top view of a run drawn with OpenCV: true landmarks, the
 // map's features shaded by M-space dimension (with 3σ ellipses of their point
 // blocks), the estimated and the true trajectory, a scale bar and a legend.
-// Generic: a feature is drawn from its coordinate blocks only (a point block
-// as a dot, several point blocks as a polyline through them). When features
+// Generic: a feature is drawn as it asks (Feature::drawing: polygons,
+// segments, labelled points in map coordinates) or, by default, from its
+// coordinate blocks only (a point block as a dot, several point blocks as a
+// polyline through them). When features
 // have 3-D points off the ground plane (ceiling lines, lamps) a side view
 // (x against height) is added under the top view, and single such points are
 // drawn as squares. The occupancy grid's picture (grid.png) draws the same
@@ -19,19 +21,11 @@
 
 #include "occupancy_grid.hpp"
 #include "outputs.hpp"
+#include "picture.hpp"
 #include "slam.hpp"
 
 namespace mspace::kernel {
 namespace {
-
-struct View {
-  double min_x = 0, min_y = 0, scale = 1;  // pixels per metre
-  int size = 1000, margin = 40;
-  cv::Point px(double x, double y) const {
-    return {margin + static_cast<int>(std::lround((x - min_x) * scale)),
-            size - margin - static_cast<int>(std::lround((y - min_y) * scale))};
-  }
-};
 
 /// The side view under the top view: x as in the top view, height z upwards.
 struct SideView {
@@ -93,8 +87,9 @@ void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const E
   cv::ellipse(img, v.px(c.x(), c.y()), axes, angle, 0, 360, colour, 1, cv::LINE_AA);
 }
 
-/// The map's features over a top view: point blocks as dots (to scale when
-/// the feature has a footprint), several point blocks as a polyline, shaded
+/// The map's features over a top view: as their drawing() asks, or point
+/// blocks as dots (to scale when the feature has a footprint), several point
+/// blocks as a polyline, shaded
 /// by M-space dimension, with 3σ ellipses; shared coordinates as squares.
 void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
   for (const MapFeature& f : slam.features()) {
@@ -102,7 +97,9 @@ void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
     const int max_dim = slam.feature_types()[f.type].type->max_mspace_dim();
     const cv::Scalar colour = dim_colour(dim, max_dim);
     const std::vector<Eigen::Vector2d> pts = point_blocks(*f.feature);
-    if (pts.size() >= 2) {
+    if (const std::optional<FeatureDrawing> drawing = f.feature->drawing()) {
+      draw_feature_drawing(img, v, *drawing, colour);
+    } else if (pts.size() >= 2) {
       for (std::size_t i = 0; i + 1 < pts.size(); ++i)
         cv::line(img, v.px(pts[i].x(), pts[i].y()), v.px(pts[i + 1].x(), pts[i + 1].y()), colour, 2, cv::LINE_AA);
     } else if (pts.size() == 1) {
@@ -153,6 +150,27 @@ void encode_png(const std::filesystem::path& file, const cv::Mat& img) {
 }
 
 }  // namespace
+
+void draw_feature_drawing(cv::Mat& img, const View& v, const FeatureDrawing& drawing, const cv::Scalar& colour) {
+  for (const DrawingItem& item : drawing.items) {
+    const Eigen::Index n = item.points.cols();
+    if (n == 0) continue;
+    auto at = [&](Eigen::Index i) { return v.px(item.points(0, i), item.points(1, i)); };
+    switch (item.kind) {
+      case DrawingItem::Kind::Polygon:  // closed: the last point joins the first
+        for (Eigen::Index i = 0; i < n; ++i) cv::line(img, at(i), at((i + 1) % n), colour, 2, cv::LINE_AA);
+        break;
+      case DrawingItem::Kind::Segments:
+        for (Eigen::Index i = 0; i + 1 < n; i += 2) cv::line(img, at(i), at(i + 1), colour, 2, cv::LINE_AA);
+        break;
+      case DrawingItem::Kind::Points:
+        for (Eigen::Index i = 0; i < n; ++i) cv::circle(img, at(i), 3, colour, cv::FILLED, cv::LINE_AA);
+        break;
+    }
+    if (!item.label.empty())
+      cv::putText(img, item.label, at(0) + cv::Point(5, -5), cv::FONT_HERSHEY_SIMPLEX, 0.4, colour, 1, cv::LINE_AA);
+  }
+}
 
 void write_picture(const std::filesystem::path& file, const Slam& slam, int size_px) {
   // Bounds over everything drawn.

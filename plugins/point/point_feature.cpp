@@ -775,4 +775,9 @@ std::unique_ptr<Feature> PointType::restore(const SavedFeature& saved) const {
   return std::make_unique<PointFeature>(config_, saved);
 }
 
+std::unique_ptr<Feature> PointType::from_true_shape(const TrueShape& shape, const Pose6& /*x_ms*/) const {
+  if (shape.kind != TrueShape::Kind::Point) return nullptr;
+  return std::make_unique<PointFeature>(config_, Eigen::Vector3d(shape.a), kDim);
+}
+
 }  // namespace mspace::point

@@ -393,6 +393,9 @@ class PointType : public FeatureType {
   /// z is outside the M-space but a tilted sensor's planar innovation still
   /// depends on it.
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
+  /// Conformance (mspace/scene.hpp): the true feature of a Point shape, at
+  /// its largest M-space dimension; nullptr for other shapes.
+  std::unique_ptr<Feature> from_true_shape(const TrueShape& shape, const Pose6& x_ms) const override;
 
   const PointConfig& config() const { return config_; }
 

@@ -247,4 +247,9 @@ std::unique_ptr<Feature> PoleType::restore(const SavedFeature& saved) const {
   return pole;
 }
 
+std::unique_ptr<Feature> PoleType::from_true_shape(const TrueShape& shape, const Pose6& /*x_ms*/) const {
+  if (shape.kind != TrueShape::Kind::VerticalCylinder) return nullptr;
+  return restore(SavedFeature{Eigen::Vector3d(shape.radius, shape.a.x(), shape.a.y()), kDim, {}});
+}
+
 }  // namespace mspace::pole

@@ -146,6 +146,9 @@ class PoleType : public FeatureType {
   /// Inverts PoleFeature::save(); throws std::invalid_argument on
   /// inconsistent saved state.
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
+  /// Conformance (mspace/scene.hpp): the true feature of a VerticalCylinder shape, at
+  /// its largest M-space dimension; nullptr for other shapes.
+  std::unique_ptr<Feature> from_true_shape(const TrueShape& shape, const Pose6& x_ms) const override;
 
   const PoleConfig& config() const { return config_; }
 

@@ -705,4 +705,16 @@ std::unique_ptr<Feature> WallType::restore(const SavedFeature& saved) const {
   return wall;
 }
 
+std::unique_ptr<Feature> WallType::from_true_shape(const TrueShape& shape, const Pose6& x_ms) const {
+  if (shape.kind != TrueShape::Kind::Segment) return nullptr;
+  // The normal γ = (t_y, −t_x) must point towards the sensor (eq. 13): order
+  // the ends so that it does.
+  Vec2 start = shape.a.head<2>(), end = shape.b.head<2>();
+  const Vec2 t = (end - start).normalized();
+  if (Vec2(t.y(), -t.x()).dot(x_ms.head<2>() - start) < 0.0) std::swap(start, end);
+  Eigen::Vector4d x_f;
+  x_f << start, end;
+  return std::make_unique<WallFeature>(config_, x_f, 4, std::vector<int>{kStart, kEnd});
+}
+
 }  // namespace mspace::wall

@@ -209,6 +209,9 @@ class WallType : public FeatureType {
   /// occluded): the ends extend 2 → 3/4 and 3 → 4.
   std::optional<SampleObservation> sample_observation(int dim, std::uint64_t seed, int k) const override;
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
+  /// Conformance (mspace/scene.hpp): the true feature of a Segment shape, at
+  /// its largest M-space dimension; nullptr for other shapes.
+  std::unique_ptr<Feature> from_true_shape(const TrueShape& shape, const Pose6& x_ms) const override;
 
   const WallConfig& config() const { return config_; }
 

@@ -1,7 +1,11 @@
 // laser_lines.cpp — see laser_lines.hpp.
 #include "laser_lines.hpp"
 
+#include <Eigen/Geometry>
+
+#include <cmath>
 #include <numbers>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 
@@ -76,6 +80,38 @@ void LaserLinesExtractor::extract(const SensorReading& reading, std::vector<Meas
   }
   for (const Segment& s : extract_segments(reading.values.col(0), reading.values.col(1), config_))
     out.push_back(to_measurement(s));
+}
+
+std::optional<SampleScene> LaserLinesExtractor::sample_scene(std::uint64_t seed) const {
+  std::mt19937_64 rng(seed);
+  auto uniform = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  constexpr double kPi = std::numbers::pi;
+  // The room: corners (0, 0), (W, 0), (W, H), (0, H) in its own frame,
+  // turned by `turn` and shifted by `at`; the sensor stands 1.5 m or more
+  // from every wall.
+  const double W = uniform(4, 10), H = uniform(4, 10), turn = uniform(-kPi, kPi);
+  const Eigen::Vector2d at(uniform(-20, 20), uniform(-20, 20));
+  const Eigen::Matrix2d R = Eigen::Rotation2Dd(turn).toRotationMatrix();
+  const Eigen::Vector2d inside(uniform(1.5, W - 1.5), uniform(1.5, H - 1.5));
+  const Eigen::Vector2d sensor = at + R * inside;
+
+  SampleScene scene;
+  scene.reading.channel = "laser";
+  scene.x_ms = make_pose2d(sensor.x(), sensor.y(), uniform(-kPi, kPi));
+  const Eigen::Vector2d corners[4] = {{0, 0}, {W, 0}, {W, H}, {0, H}};
+  for (int k = 0; k < 4; ++k) {
+    TrueShape wall;
+    wall.kind = TrueShape::Kind::Segment;
+    wall.a << at + R * corners[k], 0.0;
+    wall.b << at + R * corners[(k + 1) % 4], 0.0;
+    scene.truth.push_back(wall);
+  }
+  constexpr int kBeams = 720;
+  const Eigen::VectorXd bearings = Eigen::VectorXd::LinSpaced(kBeams, -kPi, kPi - 2 * kPi / kBeams);
+  const Eigen::VectorXd ranges = planar_scan(scene.truth, scene.x_ms, bearings, config_.max_range);
+  scene.reading.values.resize(kBeams, 2);
+  scene.reading.values << ranges, bearings;
+  return scene;
 }
 
 }  // namespace mspace::laser_lines

@@ -8,6 +8,8 @@
 // error naming the channel and time.
 #pragma once
 
+#include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "line_extraction.hpp"
@@ -27,6 +29,11 @@ class LaserLinesExtractor final : public Extractor {
   explicit LaserLinesExtractor(const LineConfig& config) : config_(config) {}
 
   void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
+
+  /// Conformance with a feature type (mspace/scene.hpp): a noise-free 360°
+  /// scan (0.5° steps) from inside a rectangular room, 4–10 m a side, turned
+  /// at random; the four walls are the true shapes (their ends are corners).
+  std::optional<SampleScene> sample_scene(std::uint64_t seed) const override;
 
   const LineConfig& config() const { return config_; }
 

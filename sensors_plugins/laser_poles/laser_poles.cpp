@@ -1,6 +1,8 @@
 // laser_poles.cpp — see laser_poles.hpp.
 #include "laser_poles.hpp"
 
+#include "pole_scene.hpp"
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
@@ -194,6 +196,18 @@ void LaserPolesExtractor::extract(const SensorReading& reading, std::vector<Meas
   for (const auto& [first, last] : clusters(beams, config_)) {
     if (std::optional<Measurement> m = pole_from_cluster(beams, first, last)) out.push_back(std::move(*m));
   }
+}
+
+std::optional<SampleScene> LaserPolesExtractor::sample_scene(std::uint64_t seed) const {
+  SampleScene scene;
+  scene.reading.channel = "laser";
+  scene.x_ms = sample_planar_pose(seed);
+  for (const Trunk& trunk : sample_trunks(seed)) scene.truth.push_back(trunk_shape(trunk, scene.x_ms));
+  const auto beams = static_cast<Eigen::Index>(std::floor(std::numbers::pi / config_.angle_step)) + 1;
+  const Eigen::VectorXd bearings =
+      Eigen::VectorXd::LinSpaced(beams, config_.start_angle, config_.start_angle + config_.angle_step * (beams - 1));
+  scene.reading.values = planar_scan(scene.truth, scene.x_ms, bearings, config_.max_range).transpose();
+  return scene;
 }
 
 }  // namespace mspace::laser_poles

@@ -24,6 +24,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -74,6 +75,11 @@ class LaserPolesExtractor final : public Extractor {
 
   /// Throws std::runtime_error naming channel and time for a malformed reading.
   void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
+
+  /// Conformance with a feature type: a noise-free 1 × N scan (the
+  /// configured start angle and step over 180°) of the trunks of
+  /// pole_scene.hpp.
+  std::optional<SampleScene> sample_scene(std::uint64_t seed) const override;
 
   const LaserPolesConfig& config() const { return config_; }
 

@@ -1,6 +1,8 @@
 // tree_detections.cpp — see tree_detections.hpp.
 #include "tree_detections.hpp"
 
+#include "pole_scene.hpp"
+
 #include <Eigen/Core>
 #include <numbers>
 #include <random>
@@ -78,6 +80,19 @@ std::optional<SensorReading> TreeDetectionsExtractor::sample_reading(std::uint64
   for (Eigen::Index i = 0; i < reading.values.rows(); ++i)
     reading.values.row(i) << uniform(2, 40), uniform(-std::numbers::pi / 2, std::numbers::pi / 2), uniform(0.1, 1.0);
   return reading;
+}
+
+std::optional<SampleScene> TreeDetectionsExtractor::sample_scene(std::uint64_t seed) const {
+  SampleScene scene;
+  scene.reading.channel = "laser";
+  scene.x_ms = laser_poles::sample_planar_pose(seed);
+  const std::vector<laser_poles::Trunk> trunks = laser_poles::sample_trunks(seed);
+  scene.reading.values.resize(static_cast<Eigen::Index>(trunks.size()), 3);
+  for (std::size_t i = 0; i < trunks.size(); ++i) {
+    scene.reading.values.row(static_cast<Eigen::Index>(i)) << trunks[i].range, trunks[i].bearing, trunks[i].diameter;
+    scene.truth.push_back(laser_poles::trunk_shape(trunks[i], scene.x_ms));
+  }
+  return scene;
 }
 
 }  // namespace mspace::tree_detections

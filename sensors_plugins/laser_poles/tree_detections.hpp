@@ -43,6 +43,8 @@ class TreeDetectionsExtractor final : public Extractor {
 
   /// Conformance: 1–8 trunks at 2–40 m, ±90°, diameters 0.1–1 m.
   std::optional<SensorReading> sample_reading(std::uint64_t seed) const override;
+  /// Conformance with a feature type: the trunks of pole_scene.hpp as rows.
+  std::optional<SampleScene> sample_scene(std::uint64_t seed) const override;
 
   const TreeDetectionsConfig& config() const { return config_; }
 

@@ -5,8 +5,11 @@
 #include <charconv>
 #include <cmath>
 #include <numbers>
+#include <random>
 #include <stdexcept>
 #include <string>
+
+#include "mspace/pose.hpp"
 
 namespace mspace::range_bearing {
 namespace {
@@ -112,6 +115,35 @@ void RangeBearingExtractor::extract(const SensorReading& reading, std::vector<Me
                 reading.values.rows(), " readings outside [", config_.min_range, ", ",
                 config_.max_range, "] m");
   }
+}
+
+std::optional<SampleScene> RangeBearingExtractor::sample_scene(std::uint64_t seed) const {
+  std::mt19937_64 rng(seed);
+  auto uniform = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  const bool planar = seed % 2 == 1;
+  constexpr double kPi = std::numbers::pi;
+  SampleScene scene;
+  scene.reading.channel = "mspace_check";
+  scene.x_ms = planar ? make_pose(uniform(-20, 20), uniform(-20, 20), uniform(0, 2), uniform(-kPi, kPi), 0, 0)
+                      : make_pose(uniform(-20, 20), uniform(-20, 20), uniform(0, 2), uniform(-kPi, kPi),
+                                  uniform(-0.3, 0.3), uniform(-0.3, 0.3));
+  const int n = std::uniform_int_distribution<int>(1, 6)(rng);
+  scene.reading.values.resize(n, planar ? 2 : 3);
+  for (int i = 0; i < n; ++i) {
+    const double r = uniform(std::max(2.0, config_.min_range), std::min(20.0, config_.max_range));
+    const double b = uniform(-kPi, kPi), e = planar ? 0.0 : uniform(-0.6, 0.6);
+    // The convention of this extractor (see the header): bearing b
+    // anticlockwise from the sensor's x axis, elevation e above its x–y plane.
+    const Eigen::Vector3d p_s(r * std::cos(e) * std::cos(b), r * std::cos(e) * std::sin(b), r * std::sin(e));
+    scene.reading.values(i, 0) = r;
+    scene.reading.values(i, 1) = b;
+    if (!planar) scene.reading.values(i, 2) = e;
+    TrueShape point;
+    point.kind = TrueShape::Kind::Point;
+    point.a = rotation(scene.x_ms) * p_s + scene.x_ms.head<3>();
+    scene.truth.push_back(point);
+  }
+  return scene;
 }
 
 }  // namespace mspace::range_bearing

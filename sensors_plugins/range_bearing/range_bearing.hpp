@@ -20,6 +20,8 @@
 // (std::runtime_error naming the channel, the time stamp and the row).
 #pragma once
 
+#include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "mspace/extractor.hpp"
@@ -52,6 +54,12 @@ class RangeBearingExtractor : public Extractor {
   explicit RangeBearingExtractor(const PluginArgs& args);
 
   void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
+
+  /// Conformance (mspace/scene.hpp): 1–6 points at 2–20 m all around a
+  /// sensor, as (r, b, e) rows of a tilted 3-D sensor (even seeds) or as
+  /// (r, b) rows of a planar one whose scan plane holds the points (odd
+  /// seeds), with the points.
+  std::optional<SampleScene> sample_scene(std::uint64_t seed) const override;
 
   const RangeBearingConfig& config() const { return config_; }
 

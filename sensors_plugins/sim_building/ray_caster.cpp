@@ -4,39 +4,21 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mspace/scene.hpp"
+
 namespace mspace::sim_building {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-double cross(const Vec2& a, const Vec2& b) { return a.x() * b.y() - a.y() * b.x(); }
-
 }  // namespace
 
-double ray_segment(const Vec2& o, const Vec2& d, const Segment& seg) {
-  // o + s·d = a + u·e with e = b − a. Crossing both sides with e and with d:
-  //   s·(d × e) = (a − o) × e,   u·(d × e) = (a − o) × d.
-  const Vec2 e = seg.b - seg.a;
-  const double denom = cross(d, e);
-  if (std::abs(denom) < 1e-15) return kInf;  // parallel (a collinear ray grazes, it does not stop)
-  const Vec2 ao = seg.a - o;
-  const double s = cross(ao, e) / denom;
-  const double u = cross(ao, d) / denom;
-  if (s < 0.0 || u < 0.0 || u > 1.0) return kInf;
-  return s;
-}
+// The closed forms are the SDK's (mspace/scene.hpp), shared with the
+// extractors' conformance scenes.
+double ray_segment(const Vec2& o, const Vec2& d, const Segment& seg) { return ray_segment_distance(o, d, seg.a, seg.b); }
 
 double ray_disc(const Vec2& o, const Vec2& d, const Disc& disc) {
-  // |o + s·d − c|² = r²  ⇔  s² + 2·s·β + γ = 0 with β = d·(o − c), γ = |o − c|² − r²;
-  // the entry point is the smaller root s = −β − √(β² − γ).
-  const Vec2 oc = o - disc.centre;
-  const double beta = d.dot(oc);
-  const double gamma = oc.squaredNorm() - disc.radius * disc.radius;
-  if (gamma <= 0.0) return kInf;  // starts inside
-  const double disc2 = beta * beta - gamma;
-  if (disc2 < 0.0) return kInf;
-  const double s = -beta - std::sqrt(disc2);
-  return s >= 0.0 ? s : kInf;
+  return ray_circle_distance(o, d, disc.centre, disc.radius);
 }
 
 RayCaster::RayCaster(std::vector<Segment> segments, std::vector<Disc> discs, double bucket)

@@ -10,6 +10,7 @@
 
 #include "check.hpp"
 #include "mspace/conformance.hpp"
+#include "mspace/feature.hpp"
 #include "mspace/numeric.hpp"
 #include "plugin_registry.hpp"
 
@@ -241,6 +242,102 @@ TEST(NumericJacobian, FallsBackToOneSidedDifferences) {
   };
   EXPECT_THROW(mspace::numeric_jacobian(mspace::NumericJacobian::other, only_at_one, Eigen::VectorXd::Ones(1)),
                std::runtime_error);
+}
+
+// ---- The extractor ↔ feature contract (check_pair, mspace/scene.hpp) ----
+
+conformance::Report check_pair(const std::string& extractor, const std::string& feature) {
+  kernel::PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  registry.add_search_dir(MSPACE_CONFORMANCE_FIXTURE_DIR);
+  const auto e = registry.load(extractor);
+  const auto f = registry.load(feature);
+  return conformance::check_pair(*e->descriptor, *f->descriptor);
+}
+
+TEST(ConformancePair, InTreeExtractorsAgreeWithTheirFeatureTypes) {
+  for (const auto& [extractor, feature] : std::vector<std::pair<std::string, std::string>>{
+           {"range_bearing", "point"}, {"tree_detections", "pole"}, {"laser_poles", "pole"}, {"laser_lines", "wall"}}) {
+    SCOPED_TRACE(extractor + " + " + feature);
+    const conformance::Report r = check_pair(extractor, feature);
+    std::ostringstream text;
+    conformance::print_report(r, text);
+    EXPECT_TRUE(r.passed()) << text.str();
+    EXPECT_TRUE(passed(r, "pair.kinds"));
+    EXPECT_TRUE(passed(r, "pair.truth_innovation"));
+    EXPECT_TRUE(passed(r, "pair.truth_found"));
+  }
+}
+
+TEST(ConformancePair, CreatedFeaturesPredictTheirMeasurement) {
+  // Point and pole enter the estimator from repeated detections at one pose.
+  EXPECT_TRUE(passed(check_pair("range_bearing", "point"), "pair.created_innovation"));
+  EXPECT_TRUE(passed(check_pair("laser_poles", "pole"), "pair.created_innovation"));
+}
+
+TEST(ConformancePair, FlippedBearingFails) {
+  // Alone the flipped extractor is a well-formed extractor…
+  EXPECT_TRUE(check("broken_bearing", MSPACE_CONFORMANCE_FIXTURE_DIR).passed());
+  // …with the point feature type it is not: the true points do not predict
+  // its bearings, and the points it reports are not where the points are.
+  const conformance::Report r = check_pair("broken_bearing", "point");
+  EXPECT_FALSE(r.passed());
+  EXPECT_FALSE(passed(r, "pair.truth_innovation"));
+  EXPECT_FALSE(passed(r, "pair.truth_found"));
+  EXPECT_TRUE(passed(r, "pair.kinds"));
+  // Created from its own measurement the point is self-consistent: a round
+  // trip through one plugin cannot see the flip.
+  EXPECT_TRUE(passed(r, "pair.created_innovation"));
+}
+
+TEST(ConformancePair, MissingHalvesSkipWithAReason) {
+  // ceiling_lines reads images and has no sample scene.
+  const conformance::Report r = check_pair("ceiling_lines", "hline");
+  const conformance::CheckResult* c = r.find("pair.truth_innovation");
+  ASSERT_NE(c, nullptr);
+  EXPECT_TRUE(c->skipped);
+  EXPECT_NE(c->note.find("sample_scene"), std::string::npos) << c->note;
+  // A pole scene given to the wall type: the wall builds nothing from a cylinder.
+  const conformance::Report w = check_pair("laser_poles", "wall");
+  const conformance::CheckResult* cw = w.find("pair.truth_innovation");
+  ASSERT_NE(cw, nullptr);
+  EXPECT_TRUE(cw->skipped);
+  EXPECT_NE(cw->note.find("vertical_cylinder"), std::string::npos) << cw->note;
+}
+
+TEST(ConformancePair, WrongKindsAreRefused) {
+  const conformance::Report r = check_pair("point", "range_bearing");
+  EXPECT_FALSE(r.passed());
+  EXPECT_FALSE(passed(r, "pair.kinds"));
+}
+
+// ---- The drawing hook (Feature::drawing) of the SDK example ----
+
+TEST(Drawing, DoorwayDrawsItsJambsAndOpening) {
+  kernel::PluginRegistry registry;
+  registry.add_search_dir(std::string(MSPACE_CONFORMANCE_FIXTURE_DIR) + "/doorway");
+  const auto plugin = registry.load("doorway");
+  PluginArgs args;
+  args.params = Params::defaults(plugin->descriptor->params);
+  const std::unique_ptr<PluginObject> object = plugin->descriptor->factory(args);
+  const auto& type = static_cast<const FeatureType&>(*object);
+  const std::optional<FeatureSample> s = type.sample(3, 7);
+  ASSERT_TRUE(s.has_value());
+  const std::optional<FeatureDrawing> d = s->feature->drawing();
+  ASSERT_TRUE(d.has_value());
+  ASSERT_EQ(d->items.size(), 3u);
+  const Eigen::VectorXd& x = s->feature->coords();
+  for (int jamb = 0; jamb < 2; ++jamb) {  // a closed square about each jamb
+    const DrawingItem& post = d->items[static_cast<std::size_t>(jamb)];
+    EXPECT_EQ(post.kind, DrawingItem::Kind::Polygon);
+    EXPECT_EQ(post.points.cols(), 4);
+    EXPECT_LT((post.points.rowwise().mean() - x.segment<2>(2 * jamb)).norm(), 1e-12);
+  }
+  const DrawingItem& opening = d->items[2];
+  EXPECT_EQ(opening.kind, DrawingItem::Kind::Segments);
+  EXPECT_EQ(opening.label, "door");
+  EXPECT_LT((opening.points.col(0) - x.segment<2>(0)).norm(), 1e-12);
+  EXPECT_LT((opening.points.col(1) - x.segment<2>(2)).norm(), 1e-12);
 }
 
 TEST(Conformance, PluginNameOfFile) {

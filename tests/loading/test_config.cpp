@@ -303,6 +303,70 @@ TEST(Config, EnvironmentVariablesAreExpandedInStrings) {
   unsetenv("MSPACE_TEST_DATA");
 }
 
+TEST(Config, EnvironmentVariablesGiveNumbersIntegersAndBools) {
+  ASSERT_EQ(setenv("MSPACE_TEST_WEIGHT", "0.5", 1), 0);
+  ASSERT_EQ(setenv("MSPACE_TEST_INDEX", "false", 1), 0);
+  ASSERT_EQ(setenv("MSPACE_TEST_BAD", "lots", 1), 0);
+  unsetenv("MSPACE_TEST_NODES");
+  const RunConfig c = parse(edited("    weight: 0.25", "    weight: ${MSPACE_TEST_WEIGHT}") +
+                            "association:\n  jcbb_max_nodes: ${MSPACE_TEST_NODES:-300}\n"
+                            "  spatial_index: ${MSPACE_TEST_INDEX}\n");
+  EXPECT_EQ(c.features[0].params.get_double("weight"), 0.5);  // a plugin parameter
+  EXPECT_EQ(c.association.jcbb_max_nodes, 300);                // an integer, from the default
+  EXPECT_FALSE(c.association.spatial_index);                   // a bool
+  // A value that is no number names the key, the text and where it came from.
+  const std::string bad = config_error(edited("    weight: 0.25", "    weight: ${MSPACE_TEST_BAD}"));
+  EXPECT_NE(bad.find("test.yaml:13:13: features.points.weight: expected a number, got 'lots' (from "
+                     "'${MSPACE_TEST_BAD}')"),
+            std::string::npos)
+      << bad;
+  EXPECT_EQ(config_error(kBase + "association:\n  jcbb_max_nodes: ${MSPACE_TEST_NODES}\n"),
+            "test.yaml:22:19: association.jcbb_max_nodes: environment variable 'MSPACE_TEST_NODES' is not set "
+            "(write ${MSPACE_TEST_NODES:-default} to give a default)");
+  // Range checks apply to the expanded value.
+  ASSERT_EQ(setenv("MSPACE_TEST_NODES", "0", 1), 0);
+  EXPECT_EQ(config_error(kBase + "association:\n  jcbb_max_nodes: ${MSPACE_TEST_NODES}\n"),
+            "test.yaml:22:19: association.jcbb_max_nodes: 0 is out of range [1, inf]");
+  for (const char* var : {"MSPACE_TEST_WEIGHT", "MSPACE_TEST_INDEX", "MSPACE_TEST_BAD", "MSPACE_TEST_NODES"})
+    unsetenv(var);
+}
+
+TEST(Config, SetOverridesAnyKeyAndIsCheckedLikeTheFile) {
+  PluginRegistry registry;
+  registry.add_search_dir(kFixtureDir);
+  auto parse_with = [&](const std::vector<std::string>& sets) {
+    return mspace::kernel::parse_config(kBase, "test.yaml", registry, sets);
+  };
+  // A plugin parameter, a kernel key, and a section the file does not have.
+  const RunConfig c = parse_with({"features.points.weight=0.75", "sensors.laser.extractor.gain=4",
+                                  "run.name=overridden", "association.jcbb_max_nodes=77"});
+  EXPECT_EQ(c.features[0].params.get_double("weight"), 0.75);
+  EXPECT_EQ(c.sensors[0].extractor.params.get_double("gain"), 4.0);
+  EXPECT_EQ(c.name, "overridden");
+  EXPECT_EQ(c.association.jcbb_max_nodes, 77);
+  // Errors name the --set, the key and the problem, like the file's.
+  auto error_of = [&](const std::vector<std::string>& sets) {
+    try {
+      parse_with(sets);
+    } catch (const mspace::kernel::ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(error_of({"association.jcbb_max_nodes=0"}),
+            "--set association.jcbb_max_nodes=0: association.jcbb_max_nodes: 0 is out of range [1, inf]");
+  EXPECT_EQ(error_of({"features.points.weight=heavy"}),
+            "--set features.points.weight=heavy: features.points.weight: expected a number, got 'heavy' "
+            "(plugin 'stub_feature')");
+  EXPECT_NE(error_of({"features.points.wieght=1"}).find("--set features.points.wieght=1: features.points.wieght: "
+                                                        "unknown parameter"),
+            std::string::npos)
+      << error_of({"features.points.wieght=1"});
+  EXPECT_EQ(error_of({"features.points.weight"}),
+            "--set features.points.weight: expected KEY=VALUE, e.g. features.points.min_observations=5");
+  EXPECT_EQ(error_of({"run.name.first=x"}), "--set run.name.first=x: 'name' is 't1', not a map of keys");
+}
+
 TEST(Config, ExpandEnvVars) {
   using mspace::kernel::expand_env_vars;
   ASSERT_EQ(setenv("MSPACE_TEST_A", "alpha", 1), 0);

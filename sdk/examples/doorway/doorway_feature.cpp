@@ -338,6 +338,22 @@ std::optional<Extension> DoorwayFeature::extend(const SensorView& last_view) {
   return std::nullopt;
 }
 
+std::optional<mspace::FeatureDrawing> DoorwayFeature::drawing() const {
+  constexpr double kHalf = 0.05;  // m: half the side of a jamb's square
+  mspace::FeatureDrawing out;
+  for (int jamb = 0; jamb < 2; ++jamb) {
+    const Eigen::Vector2d p = x_.segment<2>(2 * jamb);
+    mspace::DrawingItem post{mspace::DrawingItem::Kind::Polygon, Eigen::Matrix2Xd(2, 4), ""};
+    post.points << p.x() - kHalf, p.x() + kHalf, p.x() + kHalf, p.x() - kHalf,  //
+        p.y() - kHalf, p.y() - kHalf, p.y() + kHalf, p.y() + kHalf;
+    out.items.push_back(std::move(post));
+  }
+  mspace::DrawingItem opening{mspace::DrawingItem::Kind::Segments, Eigen::Matrix2Xd(2, 2), "door"};
+  opening.points << x_.segment<2>(0), x_.segment<2>(2);
+  out.items.push_back(std::move(opening));
+  return out;
+}
+
 mspace::SavedFeature DoorwayFeature::save() const {
   mspace::SavedFeature s{x_, mdim_, width_evidence_, {}, kSaveVersion};
   if (!observations_.empty()) {

@@ -79,6 +79,9 @@ class DoorwayFeature final : public mspace::Feature {
   /// packed by mspace/saved_state.hpp; 65 rows) and, at dim 0,
   /// "gating_covariance" (4×4).
   mspace::SavedFeature save() const override;
+  /// map.png: each jamb as a closed 10 cm square (a door-frame post seen from
+  /// above) and the opening between them as a segment labelled "door".
+  std::optional<mspace::FeatureDrawing> drawing() const override;
 
  private:
   void place_at(const Eigen::Vector4d& v, const Eigen::Matrix4d& C_v, const mspace::SensorView& view);

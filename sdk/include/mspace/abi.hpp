@@ -19,8 +19,11 @@
 // extensions that need a moving sensor; 4, from one session: PluginObject::
 // has_state, state_version, save_state and restore_state with
 // mspace/state.hpp, for checkpoints; FactorKind::Coincidence and
-// NonlinearProblem::loop_closures, loop closing by map matching).
-#define MSPACE_SDK_VERSION_MAJOR 4
+// NonlinearProblem::loop_closures, loop closing by map matching;
+// 5, s5-sdk: Extractor::sample_scene with SampleScene and mspace/scene.hpp,
+// FeatureType::from_true_shape — the extractor ↔ feature contract check;
+// Feature::drawing with FeatureDrawing/DrawingItem — the picture hook).
+#define MSPACE_SDK_VERSION_MAJOR 5
 #define MSPACE_SDK_VERSION_MINOR 0
 
 #define MSPACE_ABI_STR2(x) #x

@@ -19,7 +19,9 @@
 //   * motion models: J_rr and J_rd (eq. 26) against central differences, C_d;
 //   * estimators: a small linear-Gaussian problem against the closed-form
 //     Kalman prediction, augmentation, update (eqs. 26–32) and removal;
-//   * extractors and sources: finite, well-formed, deterministic output.
+//   * extractors and sources: finite, well-formed, deterministic output;
+//   * an extractor with a feature type (check_pair): the measurements of the
+//     extractor's sample scenes against the feature type's true features.
 // Each check keeps the worst number it saw and compares it with a tolerance.
 #pragma once
 
@@ -84,6 +86,15 @@ struct Options {
 /// Runs every check that applies to the plugin's kind. Never throws for a
 /// misbehaving plugin: exceptions become failed checks.
 Report check_plugin(const PluginDescriptor& descriptor, const Options& options = {});
+
+/// The extractor ↔ feature contract (`mspace check EXTRACTOR.so FEATURE.so`,
+/// mspace/scene.hpp): for each Extractor::sample_scene, the extractor's
+/// measurements against the true features of FeatureType::from_true_shape
+/// (|η_i|/σ_i ≤ 3 on noise-free readings, every true shape explained), and
+/// create → add_dense_information → extend → innovation ≈ 0 for each of them.
+/// SKIPs, saying why, when either plugin lacks its half. Options::params go to
+/// whichever of the two declares them.
+Report check_pair(const PluginDescriptor& extractor, const PluginDescriptor& feature, const Options& options = {});
 
 /// One line per check: "PASS  name  worst 1.2e-09  (tol ≤ 1e-06)  note",
 /// then one line per Cost.

@@ -21,6 +21,7 @@
 #include "mspace/coords.hpp"
 #include "mspace/measurement.hpp"
 #include "mspace/plugin.hpp"
+#include "mspace/scene.hpp"
 
 namespace mspace {
 
@@ -88,6 +89,21 @@ struct SavedFeature {
 };
 
 class Feature;
+
+/// What Feature::drawing() asks map.png to draw, in map coordinates (x, y).
+struct DrawingItem {
+  enum class Kind : std::uint8_t {
+    Polygon,   ///< a closed outline through the columns of `points`
+    Segments,  ///< separate segments: columns (0, 1), (2, 3), …
+    Points,    ///< a dot at each column
+  };
+  Kind kind = Kind::Points;
+  Eigen::Matrix2Xd points;
+  std::string label;  ///< written beside the item's first point (may be empty)
+};
+struct FeatureDrawing {
+  std::vector<DrawingItem> items;
+};
 
 /// Shared coordinates (T-RO §VI): what a feature proposes when one of its
 /// coordinate blocks is to be shared with a block of another feature — the
@@ -160,6 +176,11 @@ class Feature {
   /// around its point block, e.g. a tree trunk's; std::nullopt draws a dot.
   virtual std::optional<double> footprint_radius() const { return std::nullopt; }
 
+  /// For pictures only (map.png): how the feature looks from above, in map
+  /// coordinates (x, y). std::nullopt (the default) keeps the generic
+  /// drawing: the point blocks joined in order, or footprint_radius().
+  virtual std::optional<FeatureDrawing> drawing() const { return std::nullopt; }
+
   // ---- Shared coordinates (T-RO §VI, eq. 33) -------------------------------
   //
   // M-space columns are ordered: the feature's own dimensions first, then one
@@ -228,6 +249,16 @@ class FeatureType : public PluginObject {
   /// feature extends. The default (std::nullopt) makes the suite feed the
   /// sample's own measurement from its own pose every time.
   virtual std::optional<SampleObservation> sample_observation(int dim, std::uint64_t seed, int k) const;
+  /// Conformance support for `mspace check EXTRACTOR.so FEATURE.so`: the
+  /// feature that *is* `shape` (mspace/scene.hpp), as seen by a sensor at
+  /// x_ms (e.g. for a wall, which side faces the sensor), at the largest
+  /// M-space dimension, so that its innovation compares every component a
+  /// measurement has. nullptr when the type does not represent that kind of
+  /// shape; the default returns nullptr for every shape (the pair check then
+  /// SKIPs, saying so).
+  virtual std::unique_ptr<Feature> from_true_shape(const TrueShape& /*shape*/, const Pose6& /*x_ms*/) const {
+    return nullptr;
+  }
   /// Rebuilds a feature from Feature::save(): restore(f.save()) must behave
   /// exactly as f from then on. Throws std::invalid_argument for state it
   /// cannot read (wrong sizes, unknown version). The default throws
