@@ -1,4 +1,4 @@
-// Tests of the compressed EKF (plugins/cekf/cekf_filter.cpp): driven side by
+// Tests of the compressed EKF (sdk/src/cekf_filter.cpp): driven side by
 // side with the full EKF of plugins/ekf through random sequences of predict,
 // update, augment, remove, marginal and cross, it must give the same δx and
 // the same covariance to round-off at every step — across activations of
@@ -21,7 +21,7 @@
 #include <string>
 #include <vector>
 
-#include "../../plugins/cekf/cekf_filter.hpp"
+#include "mspace/cekf_filter.hpp"
 #include "../bench/range_bearing_scenario.hpp"
 #include "mspace/ekf_filter.hpp"
 
