@@ -356,6 +356,38 @@ TEST(CekfPartition, UpdateOfPassiveFeatureActivatesItAndMovesTheOthersExactly) {
   EXPECT_LE(relative_error(map.cekf.covariance(), map.ekf.covariance()), kRelTol);
 }
 
+// assign() (the smoother re-sets the running covariance after an
+// optimisation): the whole covariance is replaced, the partition is a global
+// update's, and later updates agree with the EKF given the same covariance.
+TEST(CekfPartition, AssignReplacesTheCovarianceAndLaterUpdatesAgreeWithTheEkf) {
+  PassiveMap map(6);
+  // Make one feature active and the basis non-trivial, then assign.
+  LinearizedObservation o;
+  o.idx = {0, 1, 2, 6, 7, 8};
+  o.J = random_matrix(3, 6, map.rng);
+  o.eta = VectorXd::Constant(3, 0.2);
+  o.C_eta = 0.05 * MatrixXd::Identity(3, 3);
+  map.ekf.update({o});
+  map.cekf.update({o});
+  const MatrixXd C = random_spd(map.ekf.dim(), 0.3, map.rng);
+  map.ekf.assign(C);
+  map.cekf.assign(C);
+  EXPECT_LE(relative_error(map.cekf.covariance(), C), kRelTol);
+  EXPECT_EQ(map.cekf.active_dim(), kRobotDim) << "keep_steps 0: only the robot stays active, as after a global update";
+  EXPECT_FALSE(map.cekf.is_active(6));
+  // An update of a passive feature after assign: the same δx and covariance as the EKF's.
+  o.idx = {0, 1, 2, 12, 13, 14};
+  o.J = random_matrix(3, 6, map.rng);
+  const VectorXd dx_cekf = map.cekf.update({o});
+  const VectorXd dx_ekf = map.ekf.update({o});
+  EXPECT_LE(relative_error(dx_cekf, dx_ekf), kRelTol);
+  EXPECT_LE(relative_error(map.cekf.covariance(), map.ekf.covariance()), kRelTol);
+  MatrixXd wrong = C;
+  wrong(3, 3) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(map.cekf.assign(wrong), std::invalid_argument);
+  EXPECT_THROW(map.cekf.assign(MatrixXd::Identity(3, 3)), std::invalid_argument);
+}
+
 TEST(CekfPartition, AugmentationFromPassiveRowsActivatesThem) {
   PassiveMap map(4);
   const StateAugmentation aug{{0, 6, 7}, random_matrix(2, 3, map.rng), random_spd(2, 0.2, map.rng)};
