@@ -72,6 +72,35 @@ Normal build(NonlinearProblem& problem, const SmootherOptions& o) {
   return out;
 }
 
+/// S⁻¹ for a symmetric positive definite S (read from its lower triangle),
+/// through S = L Lᵀ: M = L⁻¹ is lower triangular, so each block of its columns
+/// is solved only from its own first row down; then S⁻¹ = Mᵀ M, each block
+/// of columns a product over the rows where M is non-zero. About 4n³/3
+/// flops, against 7n³/3 for llt.solve(I) (two full triangular solves).
+Eigen::MatrixXd inverse_spd(const Eigen::MatrixXd& S) {
+  const Eigen::LLT<Eigen::MatrixXd> llt(S);
+  if (llt.info() != Eigen::Success)
+    throw std::runtime_error("smoother: the Schur complement is not positive definite");
+  const Eigen::MatrixXd& L = llt.matrixLLT();  // L in the lower triangle
+  const Eigen::Index n = S.rows();
+  constexpr Eigen::Index kBlock = 64;
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(n, n);
+  for (Eigen::Index c0 = 0; c0 < n; c0 += kBlock) {
+    const Eigen::Index b = std::min(kBlock, n - c0);
+    auto X = M.block(c0, c0, n - c0, b);
+    X.topRows(b).setIdentity();
+    L.bottomRightCorner(n - c0, n - c0).triangularView<Eigen::Lower>().solveInPlace(X);
+  }
+  Eigen::MatrixXd C(n, n);
+  for (Eigen::Index c0 = 0; c0 < n; c0 += kBlock) {
+    const Eigen::Index b = std::min(kBlock, n - c0);
+    // Rows [c0, n) of columns [c0, c0 + b): M's rows above c0 are zero there.
+    C.block(c0, c0, n - c0, b).noalias() =
+        M.bottomRightCorner(n - c0, n - c0).transpose() * M.block(c0, c0, n - c0, b);
+  }
+  return C.selfadjointView<Eigen::Lower>();
+}
+
 SpMat assemble(const Normal& normal, int n, double damping) {
   SpMat H(n, n);
   H.setFromTriplets(normal.triplets.begin(), normal.triplets.end());
@@ -283,10 +312,7 @@ void Smoother::optimise(NonlinearProblem& problem) {
       C.middleCols(c0, cols).noalias() -= H_PS.transpose() * X;
     }
   }
-  const Eigen::LLT<Eigen::MatrixXd> schur(C);
-  if (schur.info() != Eigen::Success)
-    throw std::runtime_error("smoother: the Schur complement is not positive definite");
-  C = schur.solve(Eigen::MatrixXd::Identity(state, state));
+  C = inverse_spd(C);
   std::visit([&](auto& f) { f.assign(0.5 * (C + C.transpose())); }, filter_);
   const auto t2 = std::chrono::steady_clock::now();
   report_.seconds = std::chrono::duration<double>(t2 - t0).count();
