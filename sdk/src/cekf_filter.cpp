@@ -326,6 +326,10 @@ void CekfFilter::global_update(bool all_rows) {
   if (n0_ > 0) refresh_passive_block();
   write_active_rows_into_store();
   if (dead_slots_ > 0) drop_dead_slots();
+  finish_global_update(all_rows);
+}
+
+void CekfFilter::finish_global_update(bool all_rows) {
   if (all_rows) {
     std::vector<int> all(static_cast<std::size_t>(n_));
     std::iota(all.begin(), all.end(), 0);
@@ -354,15 +358,7 @@ void CekfFilter::assign(const Eigen::MatrixXd& C) {
       p0_(std::max(s, t), std::min(s, t)) = C(i, j);
     }
   }
-  if (all_active_) {
-    std::vector<int> all(static_cast<std::size_t>(n_));
-    std::iota(all.begin(), all.end(), 0);
-    repartition(all);
-  } else {
-    repartition(choose_active());
-  }
-  start_interval();
-  ++global_updates_;
+  finish_global_update(all_active_);
 }
 
 Eigen::MatrixXd CekfFilter::covariance() const {

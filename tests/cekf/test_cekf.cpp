@@ -325,6 +325,16 @@ struct PassiveMap {
     }
     cekf.flush();
   }
+
+  /// An m-row observation of the rows idx with a random Jacobian, η = eta·1, C = c·I.
+  LinearizedObservation observation(std::vector<int> idx, int m, double eta, double c) {
+    LinearizedObservation o;
+    o.J = random_matrix(m, static_cast<int>(idx.size()), rng);
+    o.idx = std::move(idx);
+    o.eta = VectorXd::Constant(m, eta);
+    o.C_eta = c * MatrixXd::Identity(m, m);
+    return o;
+  }
 };
 
 TEST(CekfPartition, GlobalUpdateKeepsOnlyTheRobotWhenNothingWasTouched) {
@@ -362,11 +372,7 @@ TEST(CekfPartition, UpdateOfPassiveFeatureActivatesItAndMovesTheOthersExactly) {
 TEST(CekfPartition, AssignReplacesTheCovarianceAndLaterUpdatesAgreeWithTheEkf) {
   PassiveMap map(6);
   // Make one feature active and the basis non-trivial, then assign.
-  LinearizedObservation o;
-  o.idx = {0, 1, 2, 6, 7, 8};
-  o.J = random_matrix(3, 6, map.rng);
-  o.eta = VectorXd::Constant(3, 0.2);
-  o.C_eta = 0.05 * MatrixXd::Identity(3, 3);
+  LinearizedObservation o = map.observation({0, 1, 2, 6, 7, 8}, 3, 0.2, 0.05);
   map.ekf.update({o});
   map.cekf.update({o});
   const MatrixXd C = random_spd(map.ekf.dim(), 0.3, map.rng);
@@ -453,11 +459,7 @@ TEST(CekfPartition, GlobalUpdateKeepsRecentlyTouchedRowsActive) {
 
 TEST(CekfPartition, RemovalOfActiveAndPassiveRowsThenGlobalUpdate) {
   PassiveMap map(6);
-  LinearizedObservation o;
-  o.idx = {0, 1, 2, 6, 7, 8};
-  o.J = random_matrix(2, 6, map.rng);
-  o.eta = VectorXd::Constant(2, 0.1);
-  o.C_eta = 0.1 * MatrixXd::Identity(2, 2);
+  const LinearizedObservation o = map.observation({0, 1, 2, 6, 7, 8}, 2, 0.1, 0.1);
   map.cekf.update({o});
   map.ekf.update({o});
   const std::vector<int> rows = {7, 12, 13, 14};  // one active row, one passive feature

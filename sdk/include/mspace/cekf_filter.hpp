@@ -190,6 +190,9 @@ class CekfFilter final : public Estimator {
   void flush_if_needed();
   /// The global update; the new A is every row (all_rows) or choose_active().
   void global_update(bool all_rows);
+  /// Its end, once P⁰ holds every row's covariance: the new partition (every
+  /// row, or choose_active()) and a new interval.
+  void finish_global_update(bool all_rows);
   /// Multiply–adds of a global update with the given basis and active sizes.
   double global_update_cost(int basis, int active) const;
   /// Multiply–adds the plain EKF spent on this interval's updates.
