@@ -597,6 +597,21 @@ TEST(Checkpoint, NonlinearProblemMissingOrDamagedIsRefused) {
     const std::string e = resume_error(edited);
     EXPECT_NE(e.find("does not re-linearise"), std::string::npos) << e;
   }
+  // Format version 2 (before PROB): a filter's checkpoint of that version still
+  // resumes; the record PROB in a version-2 file is refused by name.
+  {
+    std::string v2 = read_text(small_checkpoint(dir / "ekf"));
+    v2[8] = 2;
+    fs::create_directories(dir / "v2_ekf");
+    std::ofstream(dir / "v2_ekf" / "map.bin", std::ios::binary) << v2;
+    EXPECT_EQ(resume_error(dir / "v2_ekf" / "map.bin"), "(no error)");
+    std::string v2_smoother = read_text(file);
+    v2_smoother[8] = 2;
+    fs::create_directories(dir / "v2_smoother");
+    std::ofstream(dir / "v2_smoother" / "map.bin", std::ios::binary) << v2_smoother;
+    const std::string e = resume_error(dir / "v2_smoother" / "map.bin");
+    EXPECT_NE(e.find("unknown record tag 'PROB'"), std::string::npos) << e;
+  }
   // Its factors cut short, and the robot's dimension changed.
   const auto with_array = [&](const std::string& changed, const std::function<void(Eigen::MatrixXd&)>& change) {
     StoredMap m = map;
