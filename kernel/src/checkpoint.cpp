@@ -90,11 +90,10 @@ std::vector<PluginRef> plugin_objects(const RunConfig& config, DataSource& sourc
 void Slam::require_checkpointable() const {
   const bool has_state = guarded(config_.estimator.instance, *estimator_lib_, "has_state",
                                  [&] { return estimator_->has_state(); });
-  if (!has_state || problem_)
-    throw PluginError("checkpoints are not supported by estimator '" + config_.estimator.plugin + "' yet (" +
-                      (problem_ ? "it re-linearises, and the kernel does not save its nonlinear problem"
-                                : "it does not save its state: PluginObject::save_state") +
-                      "); run without checkpoint_every / --checkpoint-every, or with ekf or cekf");
+  if (!has_state)
+    throw PluginError("checkpoints are not supported by estimator '" + config_.estimator.plugin +
+                      "' (it does not save its state: PluginObject::save_state); run without checkpoint_every / "
+                      "--checkpoint-every, or with an estimator that does");
 }
 
 StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
@@ -163,6 +162,8 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
     }
     c.plugins.push_back(std::move(ps));
   }
+  // The nonlinear problem of a re-linearising estimator (PROB).
+  if (problem_) problem_->save_state(c.problem.emplace());
   return map;
 }
 
@@ -239,6 +240,12 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
                      "'), which this run does not have",
                  c.plugins[i].plugin);
 
+  if (problem_.operator bool() != c.problem.has_value())
+    throw fail(problem_ ? "the estimator re-linearises but the checkpoint holds no nonlinear problem (PROB record; "
+                          "written by an older mspace or for another estimator?)"
+                        : "the checkpoint holds a nonlinear problem but this run's estimator does not re-linearise",
+               config_.estimator.plugin);
+
   // 3. The kernel's own state.
   const StoredState& run = c.run;
   std::int64_t step = 0;
@@ -313,6 +320,10 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     s.loop_false = integer_at(loops, 8, 0, 1e15, "loop_false");
     s.loop_worst_disagreement = loops(0, 9);
     s.seconds_loops = loops(0, 10);
+
+    // The nonlinear problem (after the estimator, whose rows it checks; its
+    // live factors bind to the restored features).
+    if (problem_) problem_->restore_state(*c.problem, features);
 
     // Everything read: take it.
     features_ = std::move(features);

@@ -44,6 +44,8 @@ constexpr std::uint32_t kEnd = tag_of("END ");
 constexpr std::uint32_t kParm = tag_of("PARM");
 constexpr std::uint32_t kRun = tag_of("RUN ");
 constexpr std::uint32_t kPsta = tag_of("PSTA");
+// Format version 3: the nonlinear problem of a re-linearising estimator.
+constexpr std::uint32_t kProb = tag_of("PROB");
 
 std::string tag_name(std::uint32_t tag) {
   std::string s;
@@ -266,9 +268,10 @@ std::string encode_parameters(const StoredCheckpoint& c) {
   return e.bytes();
 }
 
-std::string encode_run(const StoredCheckpoint& c) {
+/// A record that is one named state (RUN, PROB).
+std::string encode_state_payload(const StoredState& state) {
   Encoder e;
-  encode_state(e, c.run);
+  encode_state(e, state);
   return e.bytes();
 }
 
@@ -376,10 +379,12 @@ void decode_parameters(const std::string& payload, StoredCheckpoint& c) {
   d.finish();
 }
 
-void decode_run(const std::string& payload, StoredCheckpoint& c) {
+StoredState decode_state_payload(const std::string& payload) {
   Decoder d(payload);
-  decode_state(d, c.run);
+  StoredState state;
+  decode_state(d, state);
   d.finish();
+  return state;
 }
 
 StoredPluginState decode_plugin_state(const std::string& payload) {
@@ -677,9 +682,10 @@ void write_map_file(const std::filesystem::path& file, const StoredMap& map) {
   for (const StoredShared& c : map.shared) w.write(kShrd, c.id, -1, encode_shared(c));
   if (map.checkpoint) {
     w.write(kParm, 0, -1, encode_parameters(*map.checkpoint));
-    w.write(kRun, 0, -1, encode_run(*map.checkpoint));
+    w.write(kRun, 0, -1, encode_state_payload(map.checkpoint->run));
     for (std::size_t i = 0; i < map.checkpoint->plugins.size(); ++i)
       w.write(kPsta, static_cast<std::int64_t>(i), -1, encode_plugin_state(map.checkpoint->plugins[i]));
+    if (map.checkpoint->problem) w.write(kProb, 0, -1, encode_state_payload(*map.checkpoint->problem));
   }
   Encoder end;
   end.put(w.records());
@@ -754,13 +760,17 @@ StoredMap read_map_file(const std::filesystem::path& file, const std::string& ki
           parameters = true;
         } else if (r.tag == kRun) {
           if (run) throw std::runtime_error("a second RUN record");
-          decode_run(r.payload, *map.checkpoint);
+          map.checkpoint->run = decode_state_payload(r.payload);
           run = true;
         } else {
           if (r.key != static_cast<std::int64_t>(map.checkpoint->plugins.size()))
             throw std::runtime_error("plugin state records out of order");
           map.checkpoint->plugins.push_back(decode_plugin_state(r.payload));
         }
+      } else if (r.tag == kProb && map.format_version >= 3) {
+        if (!map.checkpoint) throw std::runtime_error("a nonlinear problem in a map");
+        if (map.checkpoint->problem) throw std::runtime_error("a second PROB record");
+        map.checkpoint->problem = decode_state_payload(r.payload);
       } else if (r.tag == kEnd) {
         std::uint64_t count = 0;
         {

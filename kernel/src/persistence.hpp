@@ -20,7 +20,11 @@
 // kernel's own state: step, ids, robot pose, counters, trajectory so far) and
 // PSTA (one per plugin instance with run-time state: the estimator, a data
 // source's position and random generators, …; PluginObject::save_state).
-// Version 1 maps are still read.
+// Format version 3 adds PROB (at most one, in a checkpoint): the kernel's
+// nonlinear problem of a re-linearising estimator (pose nodes, factors with
+// their last linearisations; Problem::save_state, problem_state.cpp).
+// Version 1 maps and version 2 files are still read (they have no PROB: a
+// re-linearising run cannot resume from one, and says so).
 //
 // Every feature goes through its plugin: Feature::save() on the way out,
 // FeatureType::restore() on the way in. Reading checks the whole file before
@@ -50,8 +54,8 @@ namespace mspace::kernel {
 class Slam;
 struct FeatureTypeSlot;
 
-/// The container format this build writes; it reads this one and version 1.
-inline constexpr std::uint32_t kMapFormatVersion = 2;
+/// The container format this build writes; it reads this one and versions 1 and 2.
+inline constexpr std::uint32_t kMapFormatVersion = 3;
 /// The oldest container format this build reads (a map without checkpoint records).
 inline constexpr std::uint32_t kOldestMapFormatVersion = 1;
 
@@ -126,9 +130,11 @@ struct StoredCheckpoint {
   std::string config_file;  ///< the run file it came from (for messages)
   StoredState run;          ///< the kernel's state (Slam::save_run_state)
   std::vector<StoredPluginState> plugins;
+  /// The nonlinear problem (PROB, format version 3), when the estimator re-linearises.
+  std::optional<StoredState> problem;
 };
 
-/// Everything a map file holds (format version 2; a checkpoint when `checkpoint` is set).
+/// Everything a map file holds (format version 3; a checkpoint when `checkpoint` is set).
 struct StoredMap {
   std::uint32_t format_version = kMapFormatVersion;
   std::string abi_tag;       ///< SDK ABI tag of the writer (sdk_abi_tag())

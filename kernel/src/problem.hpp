@@ -45,6 +45,11 @@
 #include "loop_closing.hpp"
 #include "plugin_registry.hpp"
 
+namespace mspace {
+class StateWriter;
+class StateReader;
+}  // namespace mspace
+
 namespace mspace::kernel {
 
 struct MapFeature;
@@ -151,6 +156,17 @@ class Problem final : public NonlinearProblem {
   int num_factors() const override { return static_cast<int>(factors_.size()); }
   bool linearize(int i, FactorLinearization& out) override;
   void retract(const Eigen::VectorXd& delta) override;
+
+  // ---- checkpoints (problem_state.cpp) ----------------------------------------
+  /// Writes everything that decides the problem's future (nodes, pending
+  /// odometry, accumulated perturbations, every factor with its last
+  /// linearisation), exactly.
+  void save_state(StateWriter& out) const;
+  /// Replaces the problem by a saved one, after the estimator's state was
+  /// restored (its dim() is checked against) and with the restored
+  /// `features` (live observation factors are bound to them by id). Checks
+  /// everything before changing anything; std::invalid_argument otherwise.
+  void restore_state(const StateReader& in, const std::vector<MapFeature>& features);
 
   /// Counters for tests and the log.
   int frozen_factors() const { return frozen_; }

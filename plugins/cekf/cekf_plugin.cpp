@@ -1,7 +1,7 @@
 // cekf_plugin.cpp — the plugin descriptor of the `cekf` estimator.
 #include <memory>
 
-#include "cekf_filter.hpp"
+#include "mspace/cekf_filter.hpp"
 #include "mspace/plugin_export.hpp"
 
 namespace {

@@ -1,6 +1,8 @@
 // smoother.cpp — periodic robust Gauss–Newton over the kernel's problem (see smoother.hpp).
 #include "smoother.hpp"
 
+#include "mspace/state.hpp"
+
 #include <Eigen/Cholesky>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
@@ -70,6 +72,35 @@ Normal build(NonlinearProblem& problem, const SmootherOptions& o) {
   return out;
 }
 
+/// S⁻¹ for a symmetric positive definite S (read from its lower triangle),
+/// through S = L Lᵀ: M = L⁻¹ is lower triangular, so each block of its columns
+/// is solved only from its own first row down; then S⁻¹ = Mᵀ M, each block
+/// of columns a product over the rows where M is non-zero. About 4n³/3
+/// flops, against 7n³/3 for llt.solve(I) (two full triangular solves).
+Eigen::MatrixXd inverse_spd(const Eigen::MatrixXd& S) {
+  const Eigen::LLT<Eigen::MatrixXd> llt(S);
+  if (llt.info() != Eigen::Success)
+    throw std::runtime_error("smoother: the Schur complement is not positive definite");
+  const Eigen::MatrixXd& L = llt.matrixLLT();  // L in the lower triangle
+  const Eigen::Index n = S.rows();
+  constexpr Eigen::Index kBlock = 64;
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(n, n);
+  for (Eigen::Index c0 = 0; c0 < n; c0 += kBlock) {
+    const Eigen::Index b = std::min(kBlock, n - c0);
+    auto X = M.block(c0, c0, n - c0, b);
+    X.topRows(b).setIdentity();
+    L.bottomRightCorner(n - c0, n - c0).triangularView<Eigen::Lower>().solveInPlace(X);
+  }
+  Eigen::MatrixXd C(n, n);
+  for (Eigen::Index c0 = 0; c0 < n; c0 += kBlock) {
+    const Eigen::Index b = std::min(kBlock, n - c0);
+    // Rows [c0, n) of columns [c0, c0 + b): M's rows above c0 are zero there.
+    C.block(c0, c0, n - c0, b).noalias() =
+        M.bottomRightCorner(n - c0, n - c0).transpose() * M.block(c0, c0, n - c0, b);
+  }
+  return C.selfadjointView<Eigen::Lower>();
+}
+
 SpMat assemble(const Normal& normal, int n, double damping) {
   SpMat H(n, n);
   H.setFromTriplets(normal.triplets.begin(), normal.triplets.end());
@@ -83,7 +114,7 @@ SpMat assemble(const Normal& normal, int n, double damping) {
 }  // namespace
 
 Smoother::Smoother(SmootherOptions options, Logger* log)
-    : o_(options), log_(log != nullptr ? log : &null_logger()), ekf_(options.initial_capacity, false) {
+    : o_(options), log_(log != nullptr ? log : &null_logger()), filter_(make_filter()) {
   if (o_.period < 0 || o_.loop_gap < 1 || o_.max_iterations < 1 || !(o_.loss_scale > 0.0) || o_.growth < 0.0 ||
       o_.loop_spacing < 0)
     throw std::invalid_argument(
@@ -91,8 +122,25 @@ Smoother::Smoother(SmootherOptions options, Logger* log)
         "required");
 }
 
+Smoother::Filter Smoother::make_filter() const {
+  if (o_.running_filter == RunningFilter::Ekf) return Filter(std::in_place_type<ekf::EkfFilter>, o_.initial_capacity);
+  return Filter(std::in_place_type<cekf::CekfFilter>, o_.max_active, o_.keep_steps);
+}
+
+const Estimator& Smoother::running() const {
+  return std::visit([](const auto& f) -> const Estimator& { return f; }, filter_);
+}
+
+Estimator& Smoother::running() {
+  return std::visit([](auto& f) -> Estimator& { return f; }, filter_);
+}
+
+Eigen::MatrixXd Smoother::covariance() const {
+  return std::visit([](const auto& f) { return f.covariance(); }, filter_);
+}
+
 void Smoother::reset(const Eigen::MatrixXd& P_rr) {
-  ekf_.reset(P_rr);
+  running().reset(P_rr);
   k_ = static_cast<int>(P_rr.rows());
   key_ = 0;
   last_optimised_ = 0;
@@ -100,13 +148,13 @@ void Smoother::reset(const Eigen::MatrixXd& P_rr) {
   loop_ = false;
 }
 
-void Smoother::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) { ekf_.predict(J_rr, Q); }
+void Smoother::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) { running().predict(J_rr, Q); }
 
 Eigen::VectorXd Smoother::update(const std::vector<LinearizedObservation>& obs) {
   std::vector<int> robot(static_cast<std::size_t>(k_));
   for (int i = 0; i < k_; ++i) robot[static_cast<std::size_t>(i)] = i;
-  const Eigen::MatrixXd C_rr = ekf_.marginal(robot);
-  Eigen::VectorXd dx = ekf_.update(obs);
+  const Eigen::MatrixXd C_rr = running().marginal(robot);
+  Eigen::VectorXd dx = running().update(obs);
   // Loop trigger: a feature row no update touched for loop_gap pose nodes,
   // re-observed with a large robot correction.
   bool stale = false;
@@ -127,18 +175,54 @@ Eigen::VectorXd Smoother::update(const std::vector<LinearizedObservation>& obs) 
 }
 
 int Smoother::augment(const StateAugmentation& aug) {
-  const int first = ekf_.augment(aug);
-  last_seen_.resize(static_cast<std::size_t>(ekf_.dim()), key_);
+  const int first = running().augment(aug);
+  last_seen_.resize(static_cast<std::size_t>(running().dim()), key_);
   return first;
 }
 
 void Smoother::remove(std::vector<int> idx) {
-  ekf_.remove(idx);
+  running().remove(idx);
   std::sort(idx.begin(), idx.end());
   std::vector<std::int64_t> kept;
   for (std::size_t i = 0; i < last_seen_.size(); ++i)
     if (!std::binary_search(idx.begin(), idx.end(), static_cast<int>(i))) kept.push_back(last_seen_[i]);
   last_seen_ = std::move(kept);
+}
+
+void Smoother::save_state(StateWriter& out) const {
+  running().save_state(out);  // the filter's own names (dims, store, …)
+  Eigen::MatrixXd s(1, 8);
+  s << k_, static_cast<double>(key_), static_cast<double>(last_optimised_), loop_ ? 1 : 0, forced_ ? 1 : 0,
+      loop_closures_seen_, optimisations_, loop_triggers_;
+  out.put("smoother", s);
+  put_ints(out, "smoother_last_seen", last_seen_);
+}
+
+void Smoother::restore_state(const StateReader& in, int version) {
+  const std::string context = "smoother restore_state";
+  if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
+  const Eigen::MatrixXd& s = get_state(in, "smoother", 1, 8, context);
+  const std::vector<double> v(s.data(), s.data() + s.size());
+  for (double x : v)
+    if (!(x >= 0 && x <= 1e15) || x != std::floor(x))
+      throw std::invalid_argument(context + ": saved counters are not non-negative integers");
+  std::vector<std::int64_t> last_seen = get_ints<std::int64_t>(in, "smoother_last_seen", 0, 1e15, context);
+  // A fresh filter of the configured kind (each refuses the other's state).
+  Filter filter = make_filter();
+  Estimator& f = std::visit([](auto& x) -> Estimator& { return x; }, filter);
+  f.restore_state(in, 1);  // throws before anything here changed
+  if (static_cast<int>(last_seen.size()) != f.dim() || v[2] > v[1] || v[3] > 1 || v[4] > 1)
+    throw std::invalid_argument(context + ": the saved bookkeeping does not match the saved filter");
+  filter_ = std::move(filter);
+  k_ = static_cast<int>(v[0]);
+  key_ = static_cast<std::int64_t>(v[1]);
+  last_optimised_ = static_cast<std::int64_t>(v[2]);
+  loop_ = v[3] != 0;
+  forced_ = v[4] != 0;
+  loop_closures_seen_ = static_cast<int>(v[5]);
+  optimisations_ = static_cast<int>(v[6]);
+  loop_triggers_ = static_cast<int>(v[7]);
+  last_seen_ = std::move(last_seen);
 }
 
 bool Smoother::relinearize(NonlinearProblem& problem, bool end_of_data) {
@@ -170,9 +254,9 @@ void Smoother::optimise(NonlinearProblem& problem) {
   ++optimisations_;
   const int n = problem.tangent_dim();
   const int state = problem.state_dim();
-  if (state != ekf_.dim())
+  if (state != running().dim())
     throw std::logic_error("smoother: the problem has " + std::to_string(state) + " state rows, the filter " +
-                           std::to_string(ekf_.dim()));
+                           std::to_string(running().dim()));
   constexpr double kDamping = 1e-9;
 
   report_ = {};
@@ -228,11 +312,8 @@ void Smoother::optimise(NonlinearProblem& problem) {
       C.middleCols(c0, cols).noalias() -= H_PS.transpose() * X;
     }
   }
-  const Eigen::LLT<Eigen::MatrixXd> schur(C);
-  if (schur.info() != Eigen::Success)
-    throw std::runtime_error("smoother: the Schur complement is not positive definite");
-  C = schur.solve(Eigen::MatrixXd::Identity(state, state));
-  ekf_.assign(0.5 * (C + C.transpose()));
+  C = inverse_spd(C);
+  std::visit([&](auto& f) { f.assign(0.5 * (C + C.transpose())); }, filter_);
   const auto t2 = std::chrono::steady_clock::now();
   report_.seconds = std::chrono::duration<double>(t2 - t0).count();
   report_.seconds_marginal = std::chrono::duration<double>(t2 - t1).count();

@@ -2,10 +2,12 @@
 // problem (mspace/problem.hpp): periodic Gauss–Newton over every pose node and
 // M-space row, with a robust loss on the observations.
 //
-// Between optimisations it is the M-space EKF (T-RO 2007 §V-B, eqs. 23–32;
-// mspace/ekf_filter.hpp, shared with the `ekf` plugin): every ordinary step
-// costs what an EKF step costs, and the EKF's covariance is what the kernel
-// gates with. The kernel calls relinearize() at the end of every step that
+// Between optimisations it is the M-space EKF (T-RO 2007 §V-B, eqs. 23–32),
+// run as the compressed EKF (mspace/cekf_filter.hpp, shared with the `cekf`
+// plugin; `running_filter: cekf`, the default) or the full one
+// (mspace/ekf_filter.hpp, shared with `ekf`; `running_filter: ekf`) — the same
+// numbers to round-off: every ordinary step costs what that filter's step
+// costs, and its covariance is what the kernel gates with. The kernel calls relinearize() at the end of every step that
 // added a pose node; the smoother optimises when
 //   - max(`period`, `growth` × all pose nodes) pose nodes have passed since
 //     the last optimisation (so the optimisations' total cost stays about
@@ -41,12 +43,17 @@
 
 #include <Eigen/Core>
 
+#include <variant>
+
+#include "mspace/cekf_filter.hpp"
 #include "mspace/ekf_filter.hpp"
 #include "mspace/estimator.hpp"
 
 namespace mspace::smoother {
 
 enum class Loss : std::uint8_t { None, Huber, Cauchy };
+/// The filter between optimisations (same numbers, different cost).
+enum class RunningFilter : std::uint8_t { Ekf, Cekf };
 
 struct SmootherOptions {
   int period = 100;           ///< pose nodes between optimisations, at least (0: only on loops)
@@ -60,7 +67,10 @@ struct SmootherOptions {
   double cost_tolerance = 1e-3;  ///< … or the cost falls by less than this fraction
   Loss loss = Loss::Huber;
   double loss_scale = 3.0;    ///< in Mahalanobis units (√χ²)
-  int initial_capacity = 64;  ///< of the EKF storage
+  int initial_capacity = 64;  ///< of the EKF storage (running_filter ekf)
+  RunningFilter running_filter = RunningFilter::Cekf;
+  int max_active = cekf::CekfFilter::kDefaultMaxActive;  ///< running_filter cekf
+  int keep_steps = cekf::CekfFilter::kDefaultKeepSteps;  ///< running_filter cekf
 };
 
 /// What the last optimisation did (tests, logs).
@@ -80,15 +90,22 @@ class Smoother final : public Estimator {
   explicit Smoother(SmootherOptions options = {}, Logger* log = nullptr);
 
   void reset(const Eigen::MatrixXd& P_rr) override;
-  int dim() const override { return ekf_.dim(); }
+  int dim() const override { return running().dim(); }
   void predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) override;
   Eigen::VectorXd update(const std::vector<LinearizedObservation>& obs) override;
   int augment(const StateAugmentation& aug) override;
-  Eigen::MatrixXd marginal(const std::vector<int>& idx) const override { return ekf_.marginal(idx); }
+  Eigen::MatrixXd marginal(const std::vector<int>& idx) const override { return running().marginal(idx); }
   Eigen::MatrixXd cross(const std::vector<int>& rows, const std::vector<int>& cols) const override {
-    return ekf_.cross(rows, cols);
+    return running().cross(rows, cols);
   }
   void remove(std::vector<int> idx) override;
+
+  /// Checkpoints: the running EKF (as `ekf` saves it) and the triggers'
+  /// bookkeeping; the kernel saves the nonlinear problem beside it.
+  bool has_state() const override { return true; }
+  int state_version() const override { return 1; }
+  void save_state(StateWriter& out) const override;
+  void restore_state(const StateReader& in, int version) override;
 
   bool wants_problem() const override { return true; }
   bool relinearize(NonlinearProblem& problem, bool end_of_data) override;
@@ -101,12 +118,19 @@ class Smoother final : public Estimator {
   int optimisations() const { return optimisations_; }
   int loop_triggers() const { return loop_triggers_; }
   const OptimisationReport& last_report() const { return report_; }
-  const ekf::EkfFilter& filter() const { return ekf_; }
+  /// The running filter's whole covariance (tests, diagnostics).
+  Eigen::MatrixXd covariance() const;
 
  private:
   SmootherOptions o_;
   Logger* log_;
-  ekf::EkfFilter ekf_;
+  using Filter = std::variant<ekf::EkfFilter, cekf::CekfFilter>;
+  /// A fresh running filter of the configured kind.
+  Filter make_filter() const;
+  const Estimator& running() const;
+  Estimator& running();
+
+  Filter filter_;
   int k_ = 0;
   std::int64_t key_ = 0;             ///< pose nodes seen by relinearize()
   std::int64_t last_optimised_ = 0;  ///< key_ at the last optimisation

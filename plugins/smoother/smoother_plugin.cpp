@@ -7,6 +7,7 @@
 namespace {
 
 using mspace::smoother::Loss;
+using mspace::smoother::RunningFilter;
 using mspace::smoother::Smoother;
 using mspace::smoother::SmootherOptions;
 
@@ -24,6 +25,9 @@ std::unique_ptr<mspace::PluginObject> make_smoother(const mspace::PluginArgs& ar
   o.loss = loss == "huber" ? Loss::Huber : loss == "cauchy" ? Loss::Cauchy : Loss::None;
   o.loss_scale = args.params.get_double("loss_scale");
   o.initial_capacity = static_cast<int>(args.params.get_int("initial_capacity"));
+  o.running_filter = args.params.get_string("running_filter") == "ekf" ? RunningFilter::Ekf : RunningFilter::Cekf;
+  o.max_active = static_cast<int>(args.params.get_int("max_active"));
+  o.keep_steps = static_cast<int>(args.params.get_int("keep_steps"));
   return std::make_unique<Smoother>(o, args.logger);
 }
 
@@ -36,7 +40,8 @@ mspace::PluginDescriptor describe() {
       "and linear factors; features retracted by eq. 24): the M-space EKF between optimisations, "
       "robust Gauss-Newton over everything every `period` pose nodes and when a feature unseen "
       "for `loop_gap` pose nodes is re-observed; the EKF covariance is then re-set to the marginal "
-      "of the optimised information matrix.";
+      "of the optimised information matrix. The EKF runs as the compressed EKF (running_filter: cekf, "
+      "as the cekf plugin) or the full one (ekf): the same numbers to round-off, different cost.";
   const SmootherOptions def;
   d.params = {
       mspace::param_int("period", def.period, "pose nodes between two optimisations (0: only on loop closures)", 0,
@@ -59,8 +64,19 @@ mspace::PluginDescriptor describe() {
       mspace::param_string("loss", "huber", "robust loss on the observation factors", {"huber", "cauchy", "none"}),
       mspace::param_double("loss_scale", def.loss_scale,
                            "where the robust loss departs from least squares, in Mahalanobis units", 1e-6),
-      mspace::param_int("initial_capacity", def.initial_capacity, "EKF state rows to allocate room for at reset", 1,
+      mspace::param_int("initial_capacity", def.initial_capacity,
+                        "EKF state rows to allocate room for at reset (running_filter: ekf)", 1, 1'000'000),
+      mspace::param_string("running_filter", "cekf",
+                           "the EKF between optimisations: cekf (compressed, cost O(active^2) per update) or ekf "
+                           "(full, O(N^2)); the same numbers to round-off",
+                           {"cekf", "ekf"}),
+      mspace::param_int("max_active", def.max_active,
+                        "running_filter cekf: active rows that trigger a global update (as the cekf plugin's)", 1,
                         1'000'000),
+      mspace::param_int("keep_steps", def.keep_steps,
+                        "running_filter cekf: rows touched within this many updates stay active (as the cekf "
+                        "plugin's)",
+                        0, 1'000'000),
   };
   d.factory = &make_smoother;
   return d;

@@ -39,7 +39,7 @@
 #include <random>
 #include <vector>
 
-#include "../../plugins/cekf/cekf_filter.hpp"
+#include "mspace/cekf_filter.hpp"
 #include "mspace/ekf_filter.hpp"
 #include "range_bearing_scenario.hpp"
 

@@ -1,4 +1,4 @@
-// Tests of the compressed EKF (plugins/cekf/cekf_filter.cpp): driven side by
+// Tests of the compressed EKF (sdk/src/cekf_filter.cpp): driven side by
 // side with the full EKF of plugins/ekf through random sequences of predict,
 // update, augment, remove, marginal and cross, it must give the same δx and
 // the same covariance to round-off at every step — across activations of
@@ -21,7 +21,7 @@
 #include <string>
 #include <vector>
 
-#include "../../plugins/cekf/cekf_filter.hpp"
+#include "mspace/cekf_filter.hpp"
 #include "../bench/range_bearing_scenario.hpp"
 #include "mspace/ekf_filter.hpp"
 
@@ -325,6 +325,16 @@ struct PassiveMap {
     }
     cekf.flush();
   }
+
+  /// An m-row observation of the rows idx with a random Jacobian, η = eta·1, C = c·I.
+  LinearizedObservation observation(std::vector<int> idx, int m, double eta, double c) {
+    LinearizedObservation o;
+    o.J = random_matrix(m, static_cast<int>(idx.size()), rng);
+    o.idx = std::move(idx);
+    o.eta = VectorXd::Constant(m, eta);
+    o.C_eta = c * MatrixXd::Identity(m, m);
+    return o;
+  }
 };
 
 TEST(CekfPartition, GlobalUpdateKeepsOnlyTheRobotWhenNothingWasTouched) {
@@ -354,6 +364,34 @@ TEST(CekfPartition, UpdateOfPassiveFeatureActivatesItAndMovesTheOthersExactly) {
   EXPECT_FALSE(map.cekf.is_active(3));
   EXPECT_GT(std::abs(dx_cekf[3]), 1e-6);
   EXPECT_LE(relative_error(map.cekf.covariance(), map.ekf.covariance()), kRelTol);
+}
+
+// assign() (the smoother re-sets the running covariance after an
+// optimisation): the whole covariance is replaced, the partition is a global
+// update's, and later updates agree with the EKF given the same covariance.
+TEST(CekfPartition, AssignReplacesTheCovarianceAndLaterUpdatesAgreeWithTheEkf) {
+  PassiveMap map(6);
+  // Make one feature active and the basis non-trivial, then assign.
+  LinearizedObservation o = map.observation({0, 1, 2, 6, 7, 8}, 3, 0.2, 0.05);
+  map.ekf.update({o});
+  map.cekf.update({o});
+  const MatrixXd C = random_spd(map.ekf.dim(), 0.3, map.rng);
+  map.ekf.assign(C);
+  map.cekf.assign(C);
+  EXPECT_LE(relative_error(map.cekf.covariance(), C), kRelTol);
+  EXPECT_EQ(map.cekf.active_dim(), kRobotDim) << "keep_steps 0: only the robot stays active, as after a global update";
+  EXPECT_FALSE(map.cekf.is_active(6));
+  // An update of a passive feature after assign: the same δx and covariance as the EKF's.
+  o.idx = {0, 1, 2, 12, 13, 14};
+  o.J = random_matrix(3, 6, map.rng);
+  const VectorXd dx_cekf = map.cekf.update({o});
+  const VectorXd dx_ekf = map.ekf.update({o});
+  EXPECT_LE(relative_error(dx_cekf, dx_ekf), kRelTol);
+  EXPECT_LE(relative_error(map.cekf.covariance(), map.ekf.covariance()), kRelTol);
+  MatrixXd wrong = C;
+  wrong(3, 3) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(map.cekf.assign(wrong), std::invalid_argument);
+  EXPECT_THROW(map.cekf.assign(MatrixXd::Identity(3, 3)), std::invalid_argument);
 }
 
 TEST(CekfPartition, AugmentationFromPassiveRowsActivatesThem) {
@@ -421,11 +459,7 @@ TEST(CekfPartition, GlobalUpdateKeepsRecentlyTouchedRowsActive) {
 
 TEST(CekfPartition, RemovalOfActiveAndPassiveRowsThenGlobalUpdate) {
   PassiveMap map(6);
-  LinearizedObservation o;
-  o.idx = {0, 1, 2, 6, 7, 8};
-  o.J = random_matrix(2, 6, map.rng);
-  o.eta = VectorXd::Constant(2, 0.1);
-  o.C_eta = 0.1 * MatrixXd::Identity(2, 2);
+  const LinearizedObservation o = map.observation({0, 1, 2, 6, 7, 8}, 2, 0.1, 0.1);
   map.cekf.update({o});
   map.ekf.update({o});
   const std::vector<int> rows = {7, 12, 13, 14};  // one active row, one passive feature

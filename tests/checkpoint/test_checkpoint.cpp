@@ -3,8 +3,11 @@
 // checkpoint up to step M writes the same trajectory.tum, ground_truth.tum,
 // map.yaml and summary.yaml (timings aside) as one uninterrupted run of M
 // steps — on the simulated world, Intel, Victoria Park and a ceiling-camera
-// route, under ekf and cekf. The smoother, which does not save its state yet,
-// is refused with a clear error; so are corrupt, truncated and foreign files.
+// route, under ekf and cekf, and under the smoother (whose nonlinear problem
+// the kernel saves: PROB) on the simulated world, Intel, Victoria Park and a
+// building with loop closing. An estimator without state is refused with a
+// clear error; so are corrupt, truncated and foreign files and a problem that
+// does not fit the run.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -253,7 +256,10 @@ bool have_victoria_park() {
 // wheel odometry, closes its loop at step 3194 under the ekf (README): a
 // checkpoint before it (the closure must happen again in the resumed leg) and
 // one after it (the merged features must stay unmatched).
-TEST(Checkpoint, LoopClosingEkf) {
+/// The generated ring of the loop-closing runs, on wheel odometry, with
+/// loop_closing on: checkpoints at each of `checkpoints`, resumed to `stop_at`.
+void expect_loop_closing_resume(const std::string& estimator, const std::vector<std::int64_t>& checkpoints,
+                                std::int64_t stop_at) {
   sim_building::GeneratorSettings settings;
   settings.laser.gap_probability = 0.003;
   settings.laser.gap_min = 40.0;
@@ -265,8 +271,26 @@ TEST(Checkpoint, LoopClosingEkf) {
     config.source.params.set("odometry", std::string("wheel"));
     config.association.loop_closing = true;
   };
-  expect_resume_equals_uninterrupted({"sim_building.yaml", "ekf", 3000, 3248, edit});
-  expect_resume_equals_uninterrupted({"sim_building.yaml", "ekf", 3200, 3248, edit});
+  for (std::int64_t at : checkpoints) {
+    SCOPED_TRACE("checkpoint at step " + std::to_string(at));
+    expect_resume_equals_uninterrupted({"sim_building.yaml", estimator, at, stop_at, edit});
+  }
+}
+
+TEST(Checkpoint, LoopClosingEkf) { expect_loop_closing_resume("ekf", {3000, 3200}, 3248); }
+
+// Under the smoother a closure adds coincidence factors to the nonlinear
+// problem and moves everything to a first guess (Problem::warp). It closes
+// at step 3203 here (one search refused as ambiguous at 3194): checkpoints
+// before the closure and after it (the coincidence factors are in PROB).
+TEST(Checkpoint, LoopClosingSmoother) { expect_loop_closing_resume("smoother", {3150, 3220}, 3248); }
+
+// The smoother: its running EKF and triggers (PSTA) and the kernel's
+// nonlinear problem (PROB: pose nodes, motion, observation, extension and
+// frozen factors with their linearisation points). 1300 is between two
+// periodic optimisations; the resumed leg has several.
+TEST(Checkpoint, SimPointsSmoother) {
+  expect_resume_equals_uninterrupted({"sim_points.yaml", "smoother", 1300, 3000, {}});
 }
 
 TEST(Checkpoint, IntelEkf) {
@@ -279,6 +303,12 @@ TEST(Checkpoint, IntelCekf) {
   expect_resume_equals_uninterrupted({"intel_walls.yaml", "cekf", 300, 600, {}});
 }
 
+// Walls: extensions freeze factors, shared corners rewrite them (joined()).
+TEST(Checkpoint, IntelSmoother) {
+  if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
+  expect_resume_equals_uninterrupted({"intel_walls.yaml", "smoother", 300, 600, {}});
+}
+
 TEST(Checkpoint, VictoriaParkEkf) {
   if (!have_victoria_park()) GTEST_SKIP() << "Victoria Park data not found in " << datasets() / "victoria_park";
   expect_resume_equals_uninterrupted({"victoria_park.yaml", "ekf", 2000, 4000, {}});
@@ -287,6 +317,11 @@ TEST(Checkpoint, VictoriaParkEkf) {
 TEST(Checkpoint, VictoriaParkCekf) {
   if (!have_victoria_park()) GTEST_SKIP() << "Victoria Park data not found in " << datasets() / "victoria_park";
   expect_resume_equals_uninterrupted({"victoria_park.yaml", "cekf", 2000, 4000, {}});
+}
+
+TEST(Checkpoint, VictoriaParkSmoother) {
+  if (!have_victoria_park()) GTEST_SKIP() << "Victoria Park data not found in " << datasets() / "victoria_park";
+  expect_resume_equals_uninterrupted({"victoria_park.yaml", "smoother", 2000, 4000, {}});
 }
 
 // The rendered ceiling route of tests/ceiling_runs (a CTest fixture renders it):
@@ -389,12 +424,13 @@ TEST(Checkpoint, InterruptedRunCheckpointsWhereItStopped) {
 
 // ---------------------------------------------------------------- refusals
 
-/// A checkpoint of sim_points at step 100 (ekf); returns its map.bin.
-fs::path small_checkpoint(const fs::path& dir) {
+/// A checkpoint of sim_points at step 100 (ekf unless told); returns its map.bin.
+fs::path small_checkpoint(const fs::path& dir, const std::string& estimator = "ekf") {
   set_log_level(LogLevel::Warn);
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
   RunConfig config = load_config(config_file("sim_points.yaml"), registry);
+  override_estimator(config, estimator, registry);
   config.output.dir = dir.string();
   config.output.picture = false;
   config.max_steps = 100;
@@ -415,20 +451,24 @@ std::string resume_error(const fs::path& checkpoint) {
   return "(no error)";
 }
 
-TEST(Checkpoint, SmootherIsRefusedWithAClearError) {
+/// A registry that also finds the test fixture estimator `ekf_trace`
+/// (tests/wall_consistency), which has no run-time state.
+void add_stateless_estimator(PluginRegistry& registry) { registry.add_search_dir(MSPACE_STATELESS_ESTIMATOR_DIR); }
+
+TEST(Checkpoint, StatelessEstimatorIsRefusedWithAClearError) {
   set_log_level(LogLevel::Warn);
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  add_stateless_estimator(registry);
   RunConfig config = load_config(config_file("sim_points.yaml"), registry);
-  override_estimator(config, "smoother", registry);
-  config.output.dir = scratch("smoother").string();
+  override_estimator(config, "ekf_trace", registry);
+  config.output.dir = scratch("stateless").string();
   config.checkpoint_every = 100;
   try {
     Slam slam(config, registry);
-    FAIL() << "a smoother run with checkpoints started";
+    FAIL() << "a run with checkpoints started under an estimator without state";
   } catch (const PluginError& e) {
-    EXPECT_NE(std::string(e.what()).find("checkpoints are not supported by estimator 'smoother' yet"),
-              std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("checkpoints are not supported by estimator 'ekf_trace'"), std::string::npos)
         << e.what();
   }
 }
@@ -480,14 +520,16 @@ TEST(Checkpoint, CorruptTruncatedAndForeignFilesAreRefusedNamingTheFile) {
     const std::string e = resume_error(dir / "nowhere");
     EXPECT_NE(e.find("no such file or folder"), std::string::npos) << e;
   }
-  // A checkpoint that cannot be made (here: a smoother run, refused before
-  // anything is written) leaves the previous one in that folder untouched.
+  // A checkpoint that cannot be made (here: an estimator without state,
+  // refused before anything is written) leaves the previous one in that
+  // folder untouched.
   {
     PluginRegistry registry;
     registry.add_search_dir(MSPACE_PLUGIN_DIR);
+    add_stateless_estimator(registry);
     RunConfig config = load_config(config_file("sim_points.yaml"), registry);
-    override_estimator(config, "smoother", registry);
-    config.output.dir = (dir / "smoother").string();
+    override_estimator(config, "ekf_trace", registry);
+    config.output.dir = (dir / "stateless").string();
     Slam slam(config, registry);
     for (int i = 0; i < 5; ++i) slam.step();
     EXPECT_THROW(write_checkpoint(slam, file.parent_path()), PluginError);
@@ -525,6 +567,74 @@ TEST(Checkpoint, PluginStateMismatchNamesThePlugin) {
   const std::string v = resume_error(edited);
   EXPECT_NE(v.find("state version 7"), std::string::npos) << v;
   EXPECT_NE(v.find("plugin 'ekf'"), std::string::npos) << v;
+}
+
+// The nonlinear problem (PROB) must be there exactly when the estimator
+// re-linearises, and must fit the run; each refusal names the file.
+TEST(Checkpoint, NonlinearProblemMissingOrDamagedIsRefused) {
+  const fs::path dir = scratch("problem");
+  const fs::path file = small_checkpoint(dir / "run", "smoother");
+  StoredMap map = read_map_file(file, "checkpoint");
+  ASSERT_TRUE(map.checkpoint && map.checkpoint->problem);
+  EXPECT_EQ(map.format_version, 3u);
+  EXPECT_EQ(resume_error(file), "(no error)") << "the intact checkpoint must resume";
+  const fs::path edited = dir / "edited" / "map.bin";
+  // Without its problem.
+  {
+    StoredMap m = map;
+    m.checkpoint->problem.reset();
+    write_map_file(edited, m);
+    const std::string e = resume_error(edited);
+    EXPECT_NE(e.find(edited.string()), std::string::npos) << e;
+    EXPECT_NE(e.find("holds no nonlinear problem"), std::string::npos) << e;
+  }
+  // A problem given to a filter.
+  {
+    const StoredMap ekf = read_map_file(small_checkpoint(dir / "ekf"), "checkpoint");
+    StoredMap m = ekf;
+    m.checkpoint->problem = map.checkpoint->problem;
+    write_map_file(edited, m);
+    const std::string e = resume_error(edited);
+    EXPECT_NE(e.find("does not re-linearise"), std::string::npos) << e;
+  }
+  // Format version 2 (before PROB): a filter's checkpoint of that version still
+  // resumes; the record PROB in a version-2 file is refused by name.
+  {
+    std::string v2 = read_text(small_checkpoint(dir / "ekf"));
+    v2[8] = 2;
+    fs::create_directories(dir / "v2_ekf");
+    std::ofstream(dir / "v2_ekf" / "map.bin", std::ios::binary) << v2;
+    EXPECT_EQ(resume_error(dir / "v2_ekf" / "map.bin"), "(no error)");
+    std::string v2_smoother = read_text(file);
+    v2_smoother[8] = 2;
+    fs::create_directories(dir / "v2_smoother");
+    std::ofstream(dir / "v2_smoother" / "map.bin", std::ios::binary) << v2_smoother;
+    const std::string e = resume_error(dir / "v2_smoother" / "map.bin");
+    EXPECT_NE(e.find("unknown record tag 'PROB'"), std::string::npos) << e;
+  }
+  // Its factors cut short, and the robot's dimension changed.
+  const auto with_array = [&](const std::string& changed, const std::function<void(Eigen::MatrixXd&)>& change) {
+    StoredMap m = map;
+    StoredState problem;
+    for (const auto& [name, value] : map.checkpoint->problem->arrays()) {
+      Eigen::MatrixXd v = value;
+      if (name == changed) change(v);
+      problem.put(name, v);
+    }
+    for (const auto& [name, bytes] : map.checkpoint->problem->bytes()) problem.put_bytes(name, bytes);
+    m.checkpoint->problem = problem;
+    write_map_file(edited, m);
+    return resume_error(edited);
+  };
+  {
+    const std::string e = with_array("factors", [](Eigen::MatrixXd& f) { f.conservativeResize(f.rows() - 1, 1); });
+    EXPECT_NE(e.find(edited.string()), std::string::npos) << e;
+    EXPECT_NE(e.find("nonlinear problem: 'factors'"), std::string::npos) << e;  // a count that no longer fits
+  }
+  {
+    const std::string e = with_array("dims", [](Eigen::MatrixXd& d) { d(0, 0) = 2; });
+    EXPECT_NE(e.find("k differs from the motion model"), std::string::npos) << e;
+  }
 }
 
 }  // namespace

@@ -137,7 +137,7 @@ TEST(SmootherSolver, LinearProblemGivesTheLeastSquaresSolutionAndTheExactMargina
     p.dense(H, x);
     EXPECT_LT((p.values() - x).lpNorm<Eigen::Infinity>(), 1e-8) << "seed " << seed;
     const Eigen::MatrixXd C = H.inverse().topLeftCorner(p.state_dim(), p.state_dim());
-    EXPECT_LT((s.filter().covariance() - C).lpNorm<Eigen::Infinity>(), 1e-8 * (1.0 + C.lpNorm<Eigen::Infinity>()))
+    EXPECT_LT((s.covariance() - C).lpNorm<Eigen::Infinity>(), 1e-8 * (1.0 + C.lpNorm<Eigen::Infinity>()))
         << "seed " << seed;
     // One Gauss–Newton step solves a linear problem; the 1e-9 Levenberg term
     // leaves remainders of that order, which take at most two more, tiny steps.

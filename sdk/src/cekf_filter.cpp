@@ -2,7 +2,7 @@
 // state of T-RO 2007 §V-B, eqs. 23–32. See cekf_filter.hpp for the partition
 // into active rows A and passive rows B and the invariants
 //   P_AB = Φ G,   P_BB = P⁰_BB − Gᵀ Ψ G.                                  (I)
-#include "cekf_filter.hpp"
+#include "mspace/cekf_filter.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
@@ -326,6 +326,10 @@ void CekfFilter::global_update(bool all_rows) {
   if (n0_ > 0) refresh_passive_block();
   write_active_rows_into_store();
   if (dead_slots_ > 0) drop_dead_slots();
+  finish_global_update(all_rows);
+}
+
+void CekfFilter::finish_global_update(bool all_rows) {
   if (all_rows) {
     std::vector<int> all(static_cast<std::size_t>(n_));
     std::iota(all.begin(), all.end(), 0);
@@ -336,6 +340,25 @@ void CekfFilter::global_update(bool all_rows) {
   all_active_ = all_rows;
   start_interval();
   ++global_updates_;
+}
+
+// C is the covariance of every row: all of it goes into P⁰ (the slots of
+// active rows included), after which the store holds what a global update
+// would have written there, and the same re-partition follows.
+void CekfFilter::assign(const Eigen::MatrixXd& C) {
+  estimator_support::require_size(C, n_, n_, "cekf assign", "C");
+  estimator_support::require_finite(C, "cekf assign", "C");
+  reserve_store();
+  memo_.clear();  // Ψ becomes 0
+  if (dead_slots_ > 0) drop_dead_slots();
+  for (int j = 0; j < n_; ++j) {
+    const int t = slot_[static_cast<std::size_t>(j)];
+    for (int i = j; i < n_; ++i) {
+      const int s = slot_[static_cast<std::size_t>(i)];
+      p0_(std::max(s, t), std::min(s, t)) = C(i, j);
+    }
+  }
+  finish_global_update(all_active_);
 }
 
 Eigen::MatrixXd CekfFilter::covariance() const {

@@ -1,5 +1,7 @@
-// cekf_filter.hpp — the compressed extended Kalman filter (Guivant & Nebot
-// 2001) over the M-space state of T-RO 2007 §V-B.
+// mspace/cekf_filter.hpp — the compressed extended Kalman filter (Guivant &
+// Nebot 2001) over the M-space state of T-RO 2007 §V-B, in the SDK library
+// because two estimator plugins use it: `cekf` and the `smoother` (its running
+// covariance between re-optimisations, re-set by assign()).
 //
 // Same interface, same numbers (to round-off) as the full EKF of plugins/ekf,
 // but an update costs O(n_A² m + n_B n0) instead of O(N² m): observations of
@@ -122,6 +124,12 @@ class CekfFilter final : public Estimator {
 
   /// The global update: brings P_AB and P_BB up to date and re-partitions.
   void flush();
+  /// Replaces the whole covariance by C (dim() × dim(), symmetric, read from
+  /// its lower triangle), e.g. the marginal of an optimised information
+  /// matrix (the smoother): C is written into P⁰ and the filter re-partitions
+  /// as a global update does (A = robot and recent rows, Φ = I, Ψ = 0).
+  /// O(dim()²). The state dimension, the touch times and U stay as they are.
+  void assign(const Eigen::MatrixXd& C);
   /// The whole covariance C_state (dim() × dim()), for tests and diagnostics.
   Eigen::MatrixXd covariance() const;
 
@@ -182,6 +190,9 @@ class CekfFilter final : public Estimator {
   void flush_if_needed();
   /// The global update; the new A is every row (all_rows) or choose_active().
   void global_update(bool all_rows);
+  /// Its end, once P⁰ holds every row's covariance: the new partition (every
+  /// row, or choose_active()) and a new interval.
+  void finish_global_update(bool all_rows);
   /// Multiply–adds of a global update with the given basis and active sizes.
   double global_update_cost(int basis, int active) const;
   /// Multiply–adds the plain EKF spent on this interval's updates.
