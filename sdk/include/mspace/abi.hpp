@@ -22,7 +22,9 @@
 // NonlinearProblem::loop_closures, loop closing by map matching;
 // 5, s5-sdk: Extractor::sample_scene with SampleScene and mspace/scene.hpp,
 // FeatureType::from_true_shape — the extractor ↔ feature contract check;
-// Feature::drawing with FeatureDrawing/DrawingItem — the picture hook).
+// Feature::drawing with FeatureDrawing/DrawingItem — the picture hook;
+// CekfFilter in the SDK library, mspace/cekf_filter.hpp, for the smoother's
+// running filter).
 #define MSPACE_SDK_VERSION_MAJOR 5
 #define MSPACE_SDK_VERSION_MINOR 0
 
