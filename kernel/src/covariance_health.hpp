@@ -5,8 +5,9 @@
 //  * after every update, the block of the state rows the update touched (the
 //    robot and the observed features) must be symmetric and have a Cholesky
 //    factor — cheap, the size of one step's observations;
-//  * every `full_every` steps (run.health_check_every) the whole covariance:
-//    its asymmetry and its smallest eigenvalue (O(n³), hence not every step).
+//  * every `full_every` steps (run.health_check_every; 0, the default: never)
+//    and at the end of the run, the whole covariance: its asymmetry and its
+//    extreme eigenvalues (O(n³), hence not every step; covariance_figures).
 // What they find goes to the run summary (covariance_health); the first block
 // that is not positive definite is a warning in the log. NaN, infinity or a
 // block of the wrong size is not a health figure but a broken estimator: the
@@ -45,7 +46,12 @@ struct CovarianceFigures {
   double asymmetry = 0.0;  ///< max|C − Cᵀ| / max|C| (0 for a zero matrix)
 };
 
-/// Eigenvalues (of the symmetric part) and asymmetry of C; C must be square.
+/// Extreme eigenvalues of the symmetric part of C, and C's asymmetry; C must
+/// be square. Exact up to 300 rows and for a matrix that is not positive
+/// definite; beyond, for a positive definite one (Cholesky), 60 steps of
+/// power and inverse iteration (Rayleigh quotients: the smallest is an upper
+/// bound, exact when converged), O(n³/3) for the factor instead of the
+/// several times more of a full eigen-decomposition.
 CovarianceFigures covariance_figures(const Eigen::MatrixXd& C);
 
 class CovarianceHealth {

@@ -38,6 +38,17 @@ fs::path scratch_dir() {
 
 void write_file(const fs::path& path, const std::string& text) { std::ofstream(path) << text; }
 
+/// The message of the std::runtime_error `read` throws, or "(no error)".
+template <class F>
+std::string error_of(F&& read) {
+  try {
+    read();
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
 std::string join(const std::vector<std::string>& fields, char separator) {
   std::string out;
   for (std::size_t i = 0; i < fields.size(); ++i) out += (i > 0 ? std::string(1, separator) : "") + fields[i];
@@ -237,22 +248,14 @@ TEST_P(StrictReader, NamesFileAndLineOrSkipsAndCounts) {
 
   if (d == Defect::MissingFile) {
     fs::remove(file);
-    try {
-      r.read(file, false);
-      FAIL() << "a missing file was read";
-    } catch (const std::runtime_error& e) {
-      EXPECT_NE(std::string(e.what()).find(file.string()), std::string::npos) << e.what();
-    }
+    const std::string error = error_of([&] { r.read(file, false); });
+    EXPECT_NE(error.find(file.string()), std::string::npos) << error;
     return;
   }
   write_file(file, "# test file\n" + join(r.record(1), r.separator) + "\n" + join(r.record(2), r.separator) + "\n" +
                        bad_record(r, d) + "\n" + join(r.record(3), r.separator) + "\n");
-  try {
-    r.read(file, false);
-    FAIL() << "the bad record '" << bad_record(r, d) << "' was read";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find(file.string() + ":4: "), std::string::npos) << e.what();
-  }
+  const std::string error = error_of([&] { r.read(file, false); });
+  EXPECT_NE(error.find(file.string() + ":4: "), std::string::npos) << "bad record '" << bad_record(r, d) << "': " << error;
   if (r.can_skip) {
     const Outcome skipped = r.read(file, true);
     EXPECT_EQ(skipped.skipped, 1u);
@@ -273,34 +276,21 @@ TEST(StrictReaders, MessagesSayWhatIsWrong) {
   write_file(clf,
              "FLASER 2 1 1 0 0 0 0 0 0 1 host 1\n"
              "FLASER 2 1 1 0 0 0 0 0 0 2 host 2 FLASER 2 1 1 0 0 0 0 0 0 3 host 3\n");
-  try {
-    carmen_log::read_log(clf, {});
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("run.clf:2: 13 extra field(s) after the time stamp"), std::string::npos)
-        << e.what();
-  }
+  const auto read_clf = [&] { carmen_log::read_log(clf, {}); };
+  std::string error = error_of(read_clf);
+  EXPECT_NE(error.find("run.clf:2: 13 extra field(s) after the time stamp"), std::string::npos) << error;
   write_file(clf, "FLASER 2 1 1 0 0 0 0 0 0 1 host 1\nFLASER 2 1 1 0 0 0 0 0 0 1 host 1\n");
-  try {
-    carmen_log::read_log(clf, {});
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("run.clf:2: time stamp 1.000000 s is that of the previous scan's 1.000000 s "
-                                         "(line 1): a repeated scan"),
-              std::string::npos)
-        << e.what();
-  }
+  error = error_of(read_clf);
+  EXPECT_NE(error.find("run.clf:2: time stamp 1.000000 s is that of the previous scan's 1.000000 s (line 1): a "
+                       "repeated scan"),
+            std::string::npos)
+      << error;
   const fs::path gps = dir / "aa3_gpsx.txt";
   write_file(gps, "21000 1 2\n21200 1 2\n21200 1 3\n");
-  try {
-    victoria_park::read_gps(gps);
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("aa3_gpsx.txt:3: time 0.233000 s repeats the previous record's (line 2: "
-                                         "0.233000 s)"),
-              std::string::npos)
-        << e.what();
-  }
+  error = error_of([&] { victoria_park::read_gps(gps); });
+  EXPECT_NE(error.find("aa3_gpsx.txt:3: time 0.233000 s repeats the previous record's (line 2: 0.233000 s)"),
+            std::string::npos)
+      << error;
 }
 
 // The skip count reaches the run summary through DataSource::skipped_records.
@@ -328,21 +318,12 @@ TEST(StrictReaders, YamlDescriptionsMustBeFinite) {
   write_file(camera,
              "width: 320\nheight: 240\nfx: 260\nfy: 260\ncx: .nan\ncy: 120\n"
              "distortion: [0, 0, 0, 0, 0]\nmount: [0, 0, 0, 0, 0, 0]\n");
-  try {
-    image_sequence::read_camera_yaml(camera.string());
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_EQ(std::string(e.what()), camera.string() + ":5: key 'cx' is not a finite number");
-  }
+  const auto read_camera = [&] { image_sequence::read_camera_yaml(camera.string()); };
+  EXPECT_EQ(error_of(read_camera), camera.string() + ":5: key 'cx' is not a finite number");
   write_file(camera,
              "width: 320\nheight: 240\nfx: 260\nfy: 260\ncx: 160\ncy: 120\n"
              "distortion: [0, 0, 0, 0, 0]\nmount: [0, 0, .inf, 0, 0, 0]\n");
-  try {
-    image_sequence::read_camera_yaml(camera.string());
-    FAIL();
-  } catch (const std::runtime_error& e) {
-    EXPECT_EQ(std::string(e.what()), camera.string() + ":8: 'mount' holds a value that is not finite");
-  }
+  EXPECT_EQ(error_of(read_camera), camera.string() + ":8: 'mount' holds a value that is not finite");
 }
 
 // A corrupt image: a PNG cut short passes the check of its signature when the
@@ -364,12 +345,7 @@ TEST(StrictReaders, TruncatedImageIsAnErrorNamingTheFile) {
   EXPECT_EQ(camera::read_grey(reading, model).cols, 64);
   fs::resize_file(png, fs::file_size(png) / 2);
   EXPECT_TRUE(cv::haveImageReader(png.string()));  // the signature is still there
-  try {
-    camera::read_grey(reading, model);
-    FAIL() << "a truncated PNG was read";
-  } catch (const std::runtime_error& e) {
-    EXPECT_EQ(std::string(e.what()), png.string() + ": cannot read image");
-  }
+  EXPECT_EQ(error_of([&] { camera::read_grey(reading, model); }), png.string() + ": cannot read image");
 }
 
 }  // namespace
