@@ -130,6 +130,7 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
   run.put("association", row_of({static_cast<double>(a.jcbb_readings), static_cast<double>(a.jcbb_nodes),
                                  static_cast<double>(a.jcbb_bounded), static_cast<double>(a.index_queries)}));
   for (std::size_t i = 0; i < health_.size(); ++i) health_[i].save(run, "health_" + std::to_string(i) + "_");
+  covariance_health_.save(run, "covariance_health_");
   // Loop closing (slam_loop_closure.cpp): its history and counters, and per
   // feature (id, created_path, last_seen_path, merged_into) — kernel
   // bookkeeping that map files do not need.
@@ -286,6 +287,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     std::vector<StampedPose> ground_truth = poses_from(run, "ground_truth");
     std::vector<StampedPose> evaluated = poses_from(run, "evaluated");
     for (std::size_t i = 0; i < health_.size(); ++i) health_[i].restore(run, "health_" + std::to_string(i) + "_");
+    covariance_health_.restore(run, "covariance_health_");
 
     RunStats s;
     s.steps = integer_at(counters, 0, 0, 1e15, "steps");

@@ -29,7 +29,8 @@ constexpr int kFirstAngle = kTheta;
 const std::vector<std::string> kTopKeys = {"run",         "source",       "motion", "estimator", "features", "sensors",
                                            "association", "initial_pose", "output", "evaluation"};
 const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor"};
-const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "checkpoint_every", "plugin_path", "seed"};
+const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "checkpoint_every", "health_check_every",
+                                            "plugin_path", "seed"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
                                                    "join_distance", "method", "jcbb_max_nodes", "spatial_index",
@@ -423,6 +424,7 @@ void Reader::read_run(const Item* item, RunConfig& config) const {
   }
   if (const Item* f = find(fields, "max_steps")) config.max_steps = integer(*f, 0);
   if (const Item* f = find(fields, "checkpoint_every")) config.checkpoint_every = integer(*f, 0);
+  if (const Item* f = find(fields, "health_check_every")) config.health_check_every = integer(*f, 0);
   if (const Item* f = find(fields, "plugin_path")) config.plugin_path = texts(*f);
   if (const Item* f = find(fields, "seed")) config.seed = integer(*f);
 }
@@ -626,6 +628,7 @@ void emit_run(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "log_level" << YAML::Value << c.log_level;
   out << YAML::Key << "max_steps" << YAML::Value << std::to_string(c.max_steps);
   out << YAML::Key << "checkpoint_every" << YAML::Value << std::to_string(c.checkpoint_every);
+  out << YAML::Key << "health_check_every" << YAML::Value << std::to_string(c.health_check_every);
   out << YAML::Key << "plugin_path" << YAML::Value;
   emit_string_list(out, c.plugin_path);
   if (c.seed) out << YAML::Key << "seed" << YAML::Value << std::to_string(*c.seed);

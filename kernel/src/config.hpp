@@ -3,7 +3,7 @@
 // Layout of a run file (every key is optional unless marked required):
 //
 //   run:          {name, log_level: info, max_steps: 0 (= all), checkpoint_every: 0 (steps; 0 = none),
-//                  plugin_path: [dirs], seed}
+//                  health_check_every: 0 (steps; 0 = at the end only), plugin_path: [dirs], seed}
 //   source:       {plugin: <name>, <parameters>}                        # required
 //   motion:       {plugin: <name>, <parameters>}                        # required
 //   estimator:    {plugin: <name>, <parameters>}                        # required
@@ -158,6 +158,9 @@ struct RunConfig {
   std::int64_t max_steps = 0;  ///< 0 = all
   /// Write <output.dir>/checkpoint/ after every this many steps (0 = never).
   std::int64_t checkpoint_every = 0;
+  /// Check the whole estimator covariance (asymmetry, smallest eigenvalue)
+  /// after every this many steps (0 = only at the end; covariance_health.hpp).
+  std::int64_t health_check_every = 0;
   std::vector<std::string> plugin_path;
   std::optional<std::int64_t> seed;
   InstanceConfig source, motion, estimator;

@@ -156,6 +156,12 @@ RunSummary summarize(const Slam& slam, double wall_seconds) {
     s.state_dimension += static_cast<int>(f.own_idx.size());
   }
   s.skipped_records = slam.skipped_records();
+  s.covariance_health = slam.covariance_health();
+  try {
+    s.final_covariance = slam.covariance_figures_now();
+  } catch (const std::exception& e) {  // a broken estimator: the summary must still be written
+    s.final_covariance_problem = e.what();
+  }
   if (!slam.config().evaluation.relations.empty())
     s.relations = evaluate_relations(traj, read_relations(slam.config().evaluation.relations),
                                      slam.config().evaluation.relations_max_dt);
@@ -241,6 +247,34 @@ void write_map_yaml(const std::filesystem::path& file, const Slam& slam) {
       << y.c_str() << '\n';
 }
 
+/// summary.yaml's covariance_health (kernel/src/covariance_health.hpp).
+void emit_covariance_health(YAML::Emitter& y, const RunSummary& s) {
+  const CovarianceHealthReport& h = s.covariance_health;
+  y << YAML::Key << "covariance_health" << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "touched_blocks_checked" << YAML::Value << h.block_checks;
+  y << YAML::Key << "touched_blocks_not_positive_definite" << YAML::Value << h.blocks_not_pd;
+  if (h.blocks_not_pd > 0) y << YAML::Key << "first_not_positive_definite_step" << YAML::Value << h.first_not_pd_step;
+  y << YAML::Key << "full_checks" << YAML::Value << h.full_checks;
+  if (h.full_checks > 0) {
+    y << YAML::Key << "min_eigenvalue" << YAML::Value << h.min_eigenvalue;
+    y << YAML::Key << "min_eigenvalue_relative" << YAML::Value << h.min_relative_eigenvalue;
+    y << YAML::Comment("smallest / largest eigenvalue of that check");
+    y << YAML::Key << "min_eigenvalue_step" << YAML::Value << h.min_eigenvalue_step;
+  }
+  y << YAML::Key << "max_asymmetry" << YAML::Value << h.max_asymmetry;
+  y << YAML::Comment("max |C - C^T| / max |C| over every matrix checked");
+  if (s.final_covariance) {
+    y << YAML::Key << "final" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "min_eigenvalue" << YAML::Value << s.final_covariance->min_eigenvalue;
+    y << YAML::Key << "max_eigenvalue" << YAML::Value << s.final_covariance->max_eigenvalue;
+    y << YAML::Key << "asymmetry" << YAML::Value << s.final_covariance->asymmetry;
+    y << YAML::EndMap;
+  } else {
+    y << YAML::Key << "final" << YAML::Value << ("not checked: " + s.final_covariance_problem);
+  }
+  y << YAML::EndMap;
+}
+
 void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, const Slam& slam) {
   const RunStats& st = slam.stats();
   YAML::Emitter y;
@@ -250,6 +284,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "config" << YAML::Value << s.config_file;
   y << YAML::Key << "steps" << YAML::Value << s.steps;
   if (!s.interrupted.empty()) y << YAML::Key << "interrupted" << YAML::Value << s.interrupted;
+  if (!s.stopped_by_error.empty()) y << YAML::Key << "stopped_by_error" << YAML::Value << s.stopped_by_error;
   y << YAML::Key << "data_seconds" << YAML::Value << s.data_seconds;
   y << YAML::Key << "wall_seconds" << YAML::Value << s.wall_seconds;
   y << YAML::Key << "state_dimension" << YAML::Value << s.state_dimension;
@@ -303,6 +338,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "extend" << YAML::Value << st.seconds_extend;
   y << YAML::Key << "loop_closing" << YAML::Value << st.seconds_loops;
   y << YAML::EndMap;
+  emit_covariance_health(y, s);
   // The health report of every sensor (kernel/src/sensor_health.hpp).
   y << YAML::Key << "sensors" << YAML::Value << YAML::BeginMap;
   for (const SensorHealthReport& h : slam.sensor_health()) {
@@ -472,6 +508,15 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     for (const std::string& n : h.notes) os << "  note: " << n << "\n";
   }
   if (s.skipped_records > 0) os << "  skipped malformed input records: " << s.skipped_records << "\n";
+  const CovarianceHealthReport& h = s.covariance_health;
+  if (s.final_covariance)
+    os << std::setprecision(3) << "  covariance: smallest eigenvalue " << s.final_covariance->min_eigenvalue
+       << " at the end";
+  else
+    os << "  covariance: not checked at the end (" << s.final_covariance_problem << ")";
+  if (h.full_checks > 0) os << ", " << h.min_eigenvalue << " at worst (step " << h.min_eigenvalue_step << ")";
+  os << "; " << h.blocks_not_pd << " of " << h.block_checks << " updates left a block not positive definite\n";
+  if (!s.stopped_by_error.empty()) os << "  STOPPED BY AN ERROR: " << s.stopped_by_error << "\n";
   return os.str();
 }
 

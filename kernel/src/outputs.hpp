@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "covariance_health.hpp"
 #include "evaluation.hpp"
 #include "relations.hpp"
 
@@ -34,6 +35,13 @@ struct RunSummary {
   std::size_t skipped_records = 0;          ///< malformed input records the source skipped
   /// Empty for a complete run; else e.g. "interrupted at step 20000 of 73159 (SIGINT)".
   std::string interrupted;
+  /// Empty unless an error stopped the run: the error's message.
+  std::string stopped_by_error;
+  /// The covariance checks of the run, and the whole covariance at its end
+  /// (final_covariance; final_covariance_problem says why it is missing).
+  CovarianceHealthReport covariance_health;
+  std::optional<CovarianceFigures> final_covariance;
+  std::string final_covariance_problem;
 };
 
 RunSummary summarize(const Slam& slam, double wall_seconds);

@@ -6,8 +6,10 @@
 #include <fstream>
 #include <numbers>
 #include <optional>
-#include <sstream>
 #include <stdexcept>
+#include <string_view>
+
+#include "mspace/records.hpp"
 
 namespace mspace::kernel {
 namespace {
@@ -57,17 +59,17 @@ std::vector<Relation> read_relations(const std::filesystem::path& file) {
   std::vector<Relation> relations;
   std::string line;
   for (int line_no = 1; std::getline(in, line); ++line_no) {
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
-    std::istringstream fields(line);
-    double t1, t2, x, y, z, roll, pitch, yaw;
-    std::string extra;
-    if (!(fields >> t1 >> t2 >> x >> y >> z >> roll >> pitch >> yaw) || (fields >> extra) ||
-        !std::isfinite(t1 + t2 + x + y + z + roll + pitch + yaw))
-      throw std::runtime_error(file.string() + ":" + std::to_string(line_no) +
-                               ": expected 8 finite numbers `t1 t2 x y z roll pitch yaw`");
+    const std::vector<std::string_view> fields = records::split(line);
+    if (fields.empty() || fields[0].front() == '#') continue;
+    // t1 t2 x y z roll pitch yaw; evaluation input, so always strict (mspace/records.hpp).
+    double v[8];
+    bool ok = fields.size() == 8;
+    for (std::size_t i = 0; ok && i < 8; ++i) ok = records::parse_finite(fields[i], v[i]);
+    if (!ok)
+      throw std::runtime_error(records::at(file.string(), line_no) + "expected 8 finite numbers `t1 t2 x y z roll pitch "
+                               "yaw`, found " + std::to_string(fields.size()) + " field(s)");
     // Pose6 holds (x, y, z, yaw θ, pitch φ, roll ψ).
-    relations.push_back({t1, t2, make_pose(x, y, z, yaw, pitch, roll)});
+    relations.push_back({v[0], v[1], make_pose(v[2], v[3], v[4], v[7], v[6], v[5])});
   }
   return relations;
 }

@@ -158,11 +158,19 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
   } catch (const std::exception& e) {
     progress.finish(static_cast<std::size_t>(slam.steps_done()), status_line(slam));
     if (options.write_outputs && slam.steps_done() > 0) {
-      result.summary = summarize(slam, elapsed());
-      result.files = write_outputs(slam, result.summary, result.output_dir, recording.scans());
-      if (stream) stream->discard();
-      kernel_log().error("run stopped after ", slam.steps_done(), " steps; the outputs of those steps were written to ",
-                         result.output_dir.string());
+      // The outputs of the steps done; a failure here (a broken plugin asked
+      // for the map's covariances again) must not hide the error itself.
+      try {
+        result.summary = summarize(slam, elapsed());
+        result.summary.stopped_by_error = e.what();
+        result.files = write_outputs(slam, result.summary, result.output_dir, recording.scans());
+        if (stream) stream->discard();
+        kernel_log().error("run stopped after ", slam.steps_done(),
+                           " steps; the outputs of those steps were written to ", result.output_dir.string());
+      } catch (const std::exception& again) {
+        kernel_log().error("run stopped after ", slam.steps_done(), " steps, and writing its outputs failed too: ",
+                           again.what(), (stream ? "; the trajectory so far is in trajectory.partial.tum" : ""));
+      }
     }
     throw;
   }

@@ -89,7 +89,10 @@ struct Slam::ReadingWork {
 };
 
 Slam::Slam(const RunConfig& config, PluginRegistry& registry)
-    : config_(config), log_(make_instance_logger("slam")), associator_(config.association, config.sensors, log_) {
+    : config_(config),
+      log_(make_instance_logger("slam")),
+      covariance_health_(config.health_check_every),
+      associator_(config.association, config.sensors, log_) {
   auto make = [&](const InstanceConfig& inst, PluginKind kind, auto* tag,
                   std::shared_ptr<const LoadedPlugin>& lib) {
     using T = std::remove_pointer_t<decltype(tag)>;
@@ -237,6 +240,7 @@ bool Slam::step() {
   }
 
   relinearize(false);
+  if (covariance_health_.full_check_due(step_)) covariance_health_.record_full(covariance_figures_now(), step_);
 
   record(data);
   if (step_observer_) step_observer_(data, trajectory_.size() - 1);
@@ -319,7 +323,7 @@ SensorView Slam::sensor_view(int sensor_index, double t) const {
   Mat6 J_sr;
   view.x_ms = compound(x_r_, sensors_[sensor_index].config.mount, &J_sr);  // eq. 17
   const Eigen::MatrixXd J = columns(J_sr, dofs_);
-  view.C_ms = J * estimator_->marginal(robot_idx_) * J.transpose();
+  view.C_ms = J * checked_marginal(robot_idx_) * J.transpose();
   view.path_distance = path_distance_;
   return view;
 }
@@ -406,7 +410,7 @@ void Slam::record_health(int sensor_index, const ReadingWork& w, double extract_
     idx.insert(idx.end(), f.state_idx.begin(), f.state_idx.end());
     const Candidate& c = match.candidate;
     health.record_update({w.measurements[match.measurement].kind, c.innovation.eta, c.J_state,
-                          estimator_->marginal(idx), c.C_eta, static_cast<int>(robot_idx_.size()),
+                          checked_marginal(idx), c.C_eta, static_cast<int>(robot_idx_.size()),
                           robot_truth_ ? robot_error(*robot_truth_, x_r_, dofs_) : Eigen::VectorXd()});
   }
   for (const std::string& warning : health.take_new_warnings()) log_->warn("step ", step_, ": ", warning);
@@ -437,9 +441,7 @@ void Slam::update(std::vector<Match>& matches) {
   }
   if (obs.empty()) return;
   stats_.updates += static_cast<std::int64_t>(obs.size());
-  const Eigen::VectorXd dx =
-      guarded(config_.estimator.instance, *estimator_lib_, "update", [&] { return estimator_->update(obs); });
-  require_finite(dx, "state perturbation", config_.estimator.instance, *estimator_lib_);
+  const Eigen::VectorXd dx = estimator_update(obs, "update");
 
   if (log_->enabled(LogLevel::Debug)) {
     std::string used;
@@ -453,6 +455,44 @@ void Slam::update(std::vector<Match>& matches) {
                 dx.head(static_cast<Eigen::Index>(dofs_.size())).transpose());
   }
   apply_correction(dx);
+}
+
+Eigen::VectorXd Slam::estimator_update(const std::vector<LinearizedObservation>& obs, const char* what) {
+  const Eigen::VectorXd dx =
+      guarded(config_.estimator.instance, *estimator_lib_, what, [&] { return estimator_->update(obs); });
+  const int dim = estimator_->dim();
+  if (dx.size() != dim)
+    throw PluginError(config_.estimator.instance + " (plugin '" + config_.estimator.plugin + "', library '" +
+                      estimator_lib_->path.string() + "'): " + what + " returned a state perturbation of size " +
+                      std::to_string(dx.size()) + " for a state of " + std::to_string(dim) + " rows");
+  require_finite(dx, "state perturbation", config_.estimator.instance, *estimator_lib_);
+  // The rows this update touched: the covariance there must still be
+  // positive definite (covariance_health.hpp).
+  std::vector<int> touched;
+  for (const LinearizedObservation& o : obs) touched.insert(touched.end(), o.idx.begin(), o.idx.end());
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  const std::string warning = covariance_health_.check_block(checked_marginal(touched), step_);
+  if (!warning.empty()) log_->warn(config_.estimator.instance, " (plugin '", config_.estimator.plugin, "'): ", warning);
+  return dx;
+}
+
+Eigen::MatrixXd Slam::checked_marginal(const std::vector<int>& idx) const {
+  const Eigen::MatrixXd C =
+      guarded(config_.estimator.instance, *estimator_lib_, "marginal", [&] { return estimator_->marginal(idx); });
+  const auto n = static_cast<Eigen::Index>(idx.size());
+  if (C.rows() != n || C.cols() != n)
+    throw PluginError(config_.estimator.instance + " (plugin '" + config_.estimator.plugin + "', library '" +
+                      estimator_lib_->path.string() + "'): marginal returned a " + std::to_string(C.rows()) + " x " +
+                      std::to_string(C.cols()) + " matrix for " + std::to_string(n) + " state rows");
+  require_finite(C, "the covariance (marginal)", config_.estimator.instance, *estimator_lib_);
+  return C;
+}
+
+CovarianceFigures Slam::covariance_figures_now() const {
+  std::vector<int> all(static_cast<std::size_t>(estimator_->dim()));
+  std::iota(all.begin(), all.end(), 0);
+  return covariance_figures(checked_marginal(all));
 }
 
 void Slam::apply_correction(const Eigen::VectorXd& dx) {
@@ -762,7 +802,7 @@ void Slam::record(const DataStep& data) {
 
   // NEES over the coordinates the ground truth knows and the filter estimates.
   const Eigen::MatrixXd J = columns(J_sr, dofs_);
-  const Eigen::MatrixXd P6 = J * estimator_->marginal(robot_idx_) * J.transpose();
+  const Eigen::MatrixXd P6 = J * checked_marginal(robot_idx_) * J.transpose();
   std::vector<int> rows;
   for (int i = 0; i < 6; ++i)
     if ((data.ground_truth_known & (1u << i)) && P6(i, i) > 0.0) rows.push_back(i);

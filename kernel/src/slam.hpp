@@ -26,6 +26,7 @@
 
 #include "association.hpp"
 #include "config.hpp"
+#include "covariance_health.hpp"
 #include "evaluation.hpp"
 #include "loop_closing.hpp"
 #include "feature_bookkeeping.hpp"
@@ -171,6 +172,11 @@ class Slam {
   std::size_t skipped_records() const;
   /// Health report of every sensor (measurements, matches, NIS, warnings).
   std::vector<SensorHealthReport> sensor_health() const;
+  /// The estimator covariance's health so far (covariance_health.hpp).
+  const CovarianceHealthReport& covariance_health() const { return covariance_health_.report(); }
+  /// Asymmetry and eigenvalues of the whole covariance now (O(n³)); throws a
+  /// PluginError naming the estimator when marginal() is broken.
+  CovarianceFigures covariance_figures_now() const;
   /// The nonlinear problem (problem.hpp), recorded only for an estimator
   /// that wants it; nullptr otherwise.
   const Problem* problem() const { return problem_.get(); }
@@ -202,6 +208,13 @@ class Slam {
   void rebuild_state_idx(MapFeature& mf) const;
   void prune_tentative();
   void record(const DataStep& data);
+  /// Estimator::update with the checks every update gets: the perturbation
+  /// must be finite and of size dim(), and the covariance of the touched rows
+  /// is checked (covariance_health.hpp). `what` says which update, for errors.
+  Eigen::VectorXd estimator_update(const std::vector<LinearizedObservation>& obs, const char* what);
+  /// The estimator's marginal(idx), checked: square of size |idx| and finite,
+  /// else a PluginError naming the estimator.
+  Eigen::MatrixXd checked_marginal(const std::vector<int>& idx) const;
   /// Applies an estimator correction dx: the robot pose and every feature (eq. 24).
   void apply_correction(const Eigen::VectorXd& dx);
   /// Map matching of the local map against the old map (slam_loop_closure.cpp).
@@ -223,6 +236,7 @@ class Slam {
   std::vector<FeatureTypeSlot> types_;
   std::vector<SensorSlot> sensors_;
   std::vector<SensorHealth> health_;  ///< one per sensor
+  CovarianceHealth covariance_health_;
   std::vector<MapFeature> features_;
   std::vector<SharedCoordinate> shared_;
   int next_shared_id_ = 1;

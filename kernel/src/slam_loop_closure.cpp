@@ -131,7 +131,7 @@ void Slam::close_loops(const DataStep& data) {
 
   // The window: 3σ plus the drift the odometry may have had since the robot
   // last matched anything older than the local map.
-  const auto [sigma_xy, sigma_theta] = planar_sigmas(estimator_->marginal(robot_idx_), dofs_);
+  const auto [sigma_xy, sigma_theta] = planar_sigmas(checked_marginal(robot_idx_), dofs_);
   const Eigen::Vector2d here = x_r_.head<2>();
   const double unanchored = path_distance_ - last_anchor_path_;
   MapMatchOptions o;
@@ -155,7 +155,7 @@ void Slam::close_loops(const DataStep& data) {
     FeatureShape s = feature_shape(mf);
     s.feature = i;
     const Eigen::MatrixXd Bt = mf.feature->B_dual();  // eq. 11: δx_f = B̃ δx_p
-    s.cov = Bt * estimator_->marginal(mf.state_idx) * Bt.transpose();
+    s.cov = Bt * checked_marginal(mf.state_idx) * Bt.transpose();
     return s;
   };
   std::vector<FeatureShape> local, old;
@@ -232,12 +232,7 @@ void Slam::close_loops(const DataStep& data) {
       obs.push_back(std::move(ob));
     }
     if (!obs.empty()) {
-      const Eigen::VectorXd dx =
-          guarded(config_.estimator.instance, *estimator_lib_, "update", [&] { return estimator_->update(obs); });
-      if (!dx.allFinite())
-        throw PluginError(config_.estimator.instance + " (plugin '" + config_.estimator.plugin +
-                          "'): update returned a non-finite state perturbation for a loop closure");
-      apply_correction(dx);
+      apply_correction(estimator_update(obs, "update (loop closure)"));
     }
   }
   for (const auto& [li, oi] : match.best.pairs) {

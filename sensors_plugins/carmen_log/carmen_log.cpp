@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "mspace/pose.hpp"
+#include "mspace/records.hpp"
 #include "scan_matcher.hpp"
 
 namespace mspace::carmen_log {
@@ -68,6 +69,8 @@ std::vector<TumPose> read_tum(const std::string& file, double time_offset) {
     if (std::abs(norm - 1.0) > 1e-3) throw std::runtime_error(where + "the quaternion is not of unit length");
     if (!poses.empty() && t + time_offset < poses.back().t)
       throw std::runtime_error(where + "time stamps go backwards");
+    if (!poses.empty() && t + time_offset == poses.back().t)
+      throw std::runtime_error(where + "the time stamp repeats the previous pose's");
     // Yaw of the rotation (the z-y-x Euler angle about z).
     const double yaw = std::atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz));
     poses.push_back({t + time_offset, Pose2(x, y, yaw)});
@@ -198,9 +201,7 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                  "offset is reported as the recorded mount of `channel`, so sensors.<name>.mount must agree"),
       param_double("flaser_fov_deg", 180.0, "field of view of FLASER scans (deg)", 1.0, 360.0),
       param_double("time_offset", 0.0, "added to every time stamp (s), e.g. 976052857.337 for intel.gfs.log"),
-      param_string("on_malformed", "error",
-                   "a malformed line is an error naming file and line, or is skipped, logged and counted",
-                   {"error", "skip"}),
+      records::on_malformed_param(),
       param_string("odometry", "wheel",
                    "the odometry increments: the log's wheel odometry, or laser odometry (point-to-line ICP "
                    "between consecutive scans, seeded with the wheel odometry, which is kept where a match fails; "

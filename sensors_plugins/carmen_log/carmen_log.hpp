@@ -45,6 +45,7 @@ class CarmenLogSource final : public DataSource {
 
   bool next(DataStep& step) override;
   std::size_t size_hint() const override { return log_.scans.size(); }
+  std::size_t skipped_records() const override { return log_.skipped; }
   Pose6 initial_pose() const override { return initial_pose_; }
 
   const LogContents& contents() const { return log_; }

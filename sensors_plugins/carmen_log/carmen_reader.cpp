@@ -67,6 +67,13 @@ class Fields {
     next_ += n;
   }
   std::size_t remaining() const { return tokens_.size() - next_; }
+  /// A CARMEN message ends with `host logger_timestamp` after its own time
+  /// stamp: more than those two fields is a line run together with another.
+  void expect_host_and_logger_time() const {
+    if (remaining() > 2)
+      throw LineError(std::to_string(remaining() - 2) + " extra field(s) after the time stamp, host and logger time "
+                      "stamp: lines run together?");
+  }
 
  private:
   const std::vector<std::string>& tokens_;
@@ -118,6 +125,7 @@ Scan parse_flaser(Fields& f, const ReaderOptions& o, Variant variant, const Carm
   const Pose2 laser_pose = f.pose("the laser pose");
   const Pose2 odom_pose = f.pose("the odometry pose");
   scan.t = f.number("the time stamp") + o.time_offset;
+  f.expect_host_and_logger_time();
   if (variant == Variant::GMapping) {
     if (!state.last_odom) throw LineError("GMapping log: FLASER before any ODOM line");
     scan.odometry = *state.last_odom;
@@ -155,6 +163,7 @@ Scan parse_robotlaser(Fields& f, const ReaderOptions& o) {
                             std::remainder(laser[2] - scan.odometry[2], 2.0 * std::numbers::pi));
   f.skip(5, "velocities and safety distances");
   scan.t = f.number("the time stamp") + o.time_offset;
+  f.expect_host_and_logger_time();
   return scan;
 }
 
@@ -433,6 +442,7 @@ LogContents read_log(const std::filesystem::path& file, const ReaderOptions& opt
           state.last_odom = f.pose("the odometry pose");
           f.skip(3, "the velocities");
           f.number("the time stamp");
+          f.expect_host_and_logger_time();
           continue;
         } else {
           continue;  // a message type this reader does not use
@@ -441,11 +451,13 @@ LogContents read_log(const std::filesystem::path& file, const ReaderOptions& opt
       out.scans.back().line = line_no;
       if (out.scans.size() >= 2) {
         const Scan& previous = out.scans[out.scans.size() - 2];
-        if (out.scans.back().t < previous.t) {
+        if (out.scans.back().t <= previous.t) {
+          const bool repeated = out.scans.back().t == previous.t;
           const std::string t = std::to_string(out.scans.back().t), t0 = std::to_string(previous.t);
           out.scans.pop_back();
-          throw LineError("time stamp " + t + " s is before the previous scan's " + t0 + " s (line " +
-                          std::to_string(previous.line) + "): time goes backwards");
+          throw LineError("time stamp " + t + " s is " + (repeated ? "that of" : "before") + " the previous scan's " +
+                          t0 + " s (line " + std::to_string(previous.line) +
+                          (repeated ? "): a repeated scan" : "): time goes backwards"));
         }
       }
     } catch (const LineError& e) {

@@ -5,12 +5,13 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
-#include <charconv>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
+#include <string_view>
+#include <type_traits>
 
 namespace mspace::image_sequence {
 namespace {
@@ -18,81 +19,56 @@ namespace {
 namespace fs = std::filesystem;
 using planar_odometry::kDegree;
 
-/// "file:line: " — the prefix of every error about a line of a file.
-std::string at(const std::string& path, int line) {
-  return path + ":" + std::to_string(line) + ": ";
-}
+using records::at;
 
-std::string trim(std::string_view s) {
-  const auto first = s.find_first_not_of(" \t\r");
-  if (first == std::string_view::npos) return {};
-  const auto last = s.find_last_not_of(" \t\r");
-  return std::string(s.substr(first, last - first + 1));
-}
+/// A problem with one record; for_each_row adds "file:line: " and reports it
+/// to the file's MalformedRecords (an error, or a counted skip).
+struct RecordError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 
-/// Splits on `separator` (',' or any run of blanks when separator is ' ').
-std::vector<std::string> split(const std::string& line, char separator) {
-  std::vector<std::string> fields;
-  std::string field;
-  for (char ch : line) {
-    const bool cut = separator == ' ' ? (ch == ' ' || ch == '\t') : ch == separator;
-    if (!cut) {
-      field += ch;
-    } else if (separator != ' ' || !field.empty()) {
-      fields.push_back(trim(field));
-      field.clear();
-    }
-  }
-  if (separator != ' ' || !field.empty()) fields.push_back(trim(field));
-  return fields;
-}
-
-bool parse_double(const std::string& text, double& value) {
-  const char* end = text.data() + text.size();
-  const auto result = std::from_chars(text.data(), end, value);
-  return result.ec == std::errc() && result.ptr == end && std::isfinite(value);
-}
+using Fields = std::vector<std::string_view>;
 
 /// Calls `row(fields, line)` for every data line of a text file; skips blank
-/// and '#' lines and a first line that does not start with a number (a header).
-void for_each_row(const std::string& path, char separator, std::size_t columns,
-                  const std::function<void(const std::vector<std::string>&, int)>& row) {
+/// and '#' lines and a first line that does not start with a number (a
+/// header). A line of another width, or one for which `row` throws a
+/// RecordError, goes to `malformed`.
+void for_each_row(const std::string& path, char separator, std::size_t columns, records::MalformedRecords& malformed,
+                  const std::function<void(const Fields&, int)>& row) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open file");
   std::string text;
   bool first_data_line = true;
   for (int line = 1; std::getline(in, text); ++line) {
-    const std::string content = trim(text);
-    if (content.empty() || content[0] == '#') continue;
-    const std::vector<std::string> fields = split(content, separator);
+    const Fields fields = records::split(text, separator);
+    const bool blank = fields.empty() || (fields.size() == 1 && fields[0].empty());
+    if (blank || fields[0].front() == '#') continue;
     double ignored = 0.0;
-    const bool header = first_data_line && !parse_double(fields[0], ignored);
+    const bool header = first_data_line && !records::parse_finite(fields[0], ignored);
     first_data_line = false;
     if (header) continue;
-    if (fields.size() != columns) {
-      throw std::runtime_error(at(path, line) + "expected " + std::to_string(columns) +
-                               " columns, found " + std::to_string(fields.size()));
+    try {
+      if (fields.size() != columns)
+        throw RecordError("expected " + std::to_string(columns) + " columns, found " + std::to_string(fields.size()));
+      row(fields, line);
+    } catch (const RecordError& e) {
+      malformed.report(path, line, e.what());
     }
-    row(fields, line);
   }
 }
 
-double number(const std::string& field, const std::string& path, int line, const char* what) {
+double number(std::string_view field, const char* what) {
   double value = 0.0;
-  if (!parse_double(field, value)) {
-    throw std::runtime_error(at(path, line) + "'" + field + "' is not a finite number (" + what +
-                             ")");
-  }
+  if (!records::parse_finite(field, value))
+    throw RecordError("'" + std::string(field) + "' is not a finite number (" + what + ")");
   return value;
 }
 
-/// Throws unless t is larger than the previous stamp of the same file.
-void check_increasing(double t, double previous, bool has_previous, const std::string& path,
-                      int line) {
+/// Throws a RecordError unless t is larger than the previous stamp of the same file.
+void check_increasing(double t, double previous, bool has_previous) {
   if (has_previous && !(t > previous)) {
-    throw std::runtime_error(at(path, line) + "time stamp " + std::to_string(t) +
-                             " s is not after the previous one (" + std::to_string(previous) +
-                             " s); stamps must increase");
+    throw RecordError("time stamp " + std::to_string(t) + " s is not after the previous one (" +
+                      std::to_string(previous) + " s); stamps must increase");
   }
 }
 
@@ -106,17 +82,26 @@ template <class T>
 T yaml_value(const YAML::Node& root, const char* key, const std::string& path) {
   const YAML::Node node = root[key];
   if (!node) throw std::runtime_error(path + ": missing key '" + key + "'");
+  T value;
   try {
-    return node.as<T>();
+    value = node.as<T>();
   } catch (const YAML::Exception&) {
     throw std::runtime_error(at(path, node.Mark().line + 1) + "key '" + key +
                              "' has the wrong type");
   }
+  if constexpr (std::is_floating_point_v<T>) {
+    if (!std::isfinite(value))
+      throw std::runtime_error(at(path, node.Mark().line + 1) + "key '" + key + "' is not a finite number");
+  }
+  return value;
 }
 
 std::vector<double> yaml_list(const YAML::Node& root, const char* key, std::size_t size,
                               const std::string& path) {
   const auto values = yaml_value<std::vector<double>>(root, key, path);
+  for (double v : values)
+    if (!std::isfinite(v))
+      throw std::runtime_error(at(path, root[key].Mark().line + 1) + "'" + key + "' holds a value that is not finite");
   if (values.size() != size) {
     throw std::runtime_error(at(path, root[key].Mark().line + 1) + "'" + key + "' needs " +
                              std::to_string(size) + " numbers, has " +
@@ -198,28 +183,29 @@ camera::CameraModel read_camera_yaml(const std::string& path) {
   return c;
 }
 
-std::vector<Frame> read_frames_csv(const std::string& path, const std::string& folder) {
+std::vector<Frame> read_frames_csv(const std::string& path, const std::string& folder,
+                                   records::MalformedRecords& malformed) {
   require_file(path, "frame list (frames.csv)");
   std::vector<Frame> frames;
-  for_each_row(path, ',', 2, [&](const std::vector<std::string>& f, int line) {
-    const double t = number(f[0], path, line, "t_s");
-    check_increasing(t, frames.empty() ? 0.0 : frames.back().t, !frames.empty(), path, line);
-    if (f[1].empty()) throw std::runtime_error(at(path, line) + "empty image path");
+  for_each_row(path, ',', 2, malformed, [&](const Fields& f, int line) {
+    const double t = number(f[0], "t_s");
+    check_increasing(t, frames.empty() ? 0.0 : frames.back().t, !frames.empty());
+    if (f[1].empty()) throw RecordError("empty image path");
     frames.push_back({t, (fs::path(folder) / f[1]).string(), line});
   });
   if (frames.empty()) throw std::runtime_error(path + ": no frames");
   return frames;
 }
 
-std::vector<StampedPose2> read_odometry_csv(const std::string& path) {
+std::vector<StampedPose2> read_odometry_csv(const std::string& path, records::MalformedRecords& malformed) {
   require_file(path, "odometry (odometry.csv)");
   std::vector<StampedPose2> poses;
   static const char* const names[] = {"t_s", "x_m", "y_m", "theta_rad"};
-  for_each_row(path, ',', 4, [&](const std::vector<std::string>& f, int line) {
+  for_each_row(path, ',', 4, malformed, [&](const Fields& f, int) {
     StampedPose2 p;
-    p.t = number(f[0], path, line, names[0]);
-    for (int i = 0; i < 3; ++i) p.pose[i] = number(f[i + 1], path, line, names[i + 1]);
-    check_increasing(p.t, poses.empty() ? 0.0 : poses.back().t, !poses.empty(), path, line);
+    p.t = number(f[0], names[0]);
+    for (int i = 0; i < 3; ++i) p.pose[i] = number(f[i + 1], names[i + 1]);
+    check_increasing(p.t, poses.empty() ? 0.0 : poses.back().t, !poses.empty());
     poses.push_back(p);
   });
   if (poses.size() < 2) throw std::runtime_error(path + ": needs at least two poses");
@@ -228,15 +214,14 @@ std::vector<StampedPose2> read_odometry_csv(const std::string& path) {
 
 std::vector<StampedPose6> read_tum(const std::string& path) {
   require_file(path, "TUM trajectory");
+  records::MalformedRecords strict;  // ground truth: never skipped (mspace/records.hpp)
   std::vector<StampedPose6> poses;
-  for_each_row(path, ' ', 8, [&](const std::vector<std::string>& f, int line) {
+  for_each_row(path, ' ', 8, strict, [&](const Fields& f, int) {
     double v[8];
-    for (int i = 0; i < 8; ++i) v[i] = number(f[static_cast<std::size_t>(i)], path, line, "TUM");
-    check_increasing(v[0], poses.empty() ? 0.0 : poses.back().t, !poses.empty(), path, line);
+    for (int i = 0; i < 8; ++i) v[i] = number(f[static_cast<std::size_t>(i)], "TUM");
+    check_increasing(v[0], poses.empty() ? 0.0 : poses.back().t, !poses.empty());
     const Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);  // (w, x, y, z)
-    if (std::abs(q.norm() - 1.0) > 1e-3) {
-      throw std::runtime_error(at(path, line) + "quaternion is not of unit length");
-    }
+    if (std::abs(q.norm() - 1.0) > 1e-3) throw RecordError("quaternion is not of unit length");
     StampedPose6 p;
     p.t = v[0];
     p.pose.head<3>() = Eigen::Vector3d(v[1], v[2], v[3]);
@@ -246,7 +231,8 @@ std::vector<StampedPose6> read_tum(const std::string& path) {
   return poses;
 }
 
-LaserScans read_laser(const std::string& yaml_path, const std::string& csv_path) {
+LaserScans read_laser(const std::string& yaml_path, const std::string& csv_path,
+                      records::MalformedRecords& malformed) {
   require_file(yaml_path, "laser description (laser.yaml)");
   require_file(csv_path, "laser scans (laser.csv)");
   YAML::Node root;
@@ -265,14 +251,14 @@ LaserScans read_laser(const std::string& yaml_path, const std::string& csv_path)
   const std::vector<double> m = yaml_list(root, "mount", 6, yaml_path);
   scans.mount = make_pose(m[0], m[1], m[2], m[5] * kDegree, m[4] * kDegree, m[3] * kDegree);
 
-  for_each_row(csv_path, ',', static_cast<std::size_t>(beams) + 1,
-               [&](const std::vector<std::string>& f, int line) {
-                 const double t = number(f[0], csv_path, line, "t_s");
-                 check_increasing(t, scans.t.empty() ? 0.0 : scans.t.back(), !scans.t.empty(),
-                                  csv_path, line);
+  for_each_row(csv_path, ',', static_cast<std::size_t>(beams) + 1, malformed,
+               [&](const Fields& f, int) {
+                 const double t = number(f[0], "t_s");
+                 check_increasing(t, scans.t.empty() ? 0.0 : scans.t.back(), !scans.t.empty());
                  Eigen::VectorXd r(beams);
                  for (int i = 0; i < beams; ++i) {
-                   r[i] = number(f[static_cast<std::size_t>(i) + 1], csv_path, line, "range");
+                   r[i] = number(f[static_cast<std::size_t>(i) + 1], "range");
+                   if (r[i] < 0.0) throw RecordError("negative range");
                  }
                  scans.t.push_back(t);
                  scans.ranges.push_back(std::move(r));
@@ -308,26 +294,30 @@ std::vector<ParamSpec> ImageSequence::param_specs() {
       param_string("channel", "camera", "channel name of the image readings"),
       param_string("laser_channel", "laser",
                    "channel name of the laser scans (laser.yaml + laser.csv, when present)"),
+      records::on_malformed_param(),
   };
 }
 
 ImageSequence::ImageSequence(const std::string& folder, const std::string& channel, Logger& log,
-                             const std::string& laser_channel)
-    : folder_(folder), channel_(channel), laser_channel_(laser_channel) {
+                             const std::string& laser_channel, const std::string& on_malformed)
+    : folder_(folder), channel_(channel), laser_channel_(laser_channel), malformed_(on_malformed) {
   const fs::path dir(folder);
   if (!fs::is_directory(dir)) throw std::runtime_error(folder + ": not a folder");
   camera_ = read_camera_yaml((dir / "camera.yaml").string());
   camera_row_ = camera::reading_row(camera_);
   const std::string frames_csv = (dir / "frames.csv").string();
-  std::vector<Frame> frames = read_frames_csv(frames_csv, folder);
+  std::vector<Frame> frames = read_frames_csv(frames_csv, folder, malformed_);
   check_images(frames, frames_csv);
-  odometry_ = read_odometry_csv((dir / "odometry.csv").string());
+  odometry_ = read_odometry_csv((dir / "odometry.csv").string(), malformed_);
   const std::string tum = (dir / "groundtruth.tum").string();
   if (fs::exists(tum)) ground_truth_ = read_tum(tum);
   const fs::path laser_yaml = dir / "laser.yaml", laser_csv = dir / "laser.csv";
   if (fs::exists(laser_yaml) || fs::exists(laser_csv)) {
-    laser_ = read_laser(laser_yaml.string(), laser_csv.string());
+    laser_ = read_laser(laser_yaml.string(), laser_csv.string(), malformed_);
   }
+  if (malformed_.skipped() > 0)
+    log.warn("image sequence ", folder, ": skipped ", malformed_.skipped(), " malformed record(s); the first: ",
+             malformed_.first_problem());
 
   for (Frame& frame : frames) {
     if (covers(odometry_, frame.t)) frames_.push_back(std::move(frame));
@@ -347,7 +337,8 @@ ImageSequence::ImageSequence(const std::string& folder, const std::string& chann
 
 ImageSequence::ImageSequence(const PluginArgs& args)
     : ImageSequence(args.params.get_string("folder"), args.params.get_string("channel"),
-                    args.log(), args.params.get_string("laser_channel")) {}
+                    args.log(), args.params.get_string("laser_channel"),
+                    args.params.get_string("on_malformed")) {}
 
 Pose6 ImageSequence::initial_pose() const {
   const Eigen::Vector3d p = interpolate(odometry_, frames_.front().t);

@@ -37,8 +37,10 @@
 //
 // Errors (std::runtime_error) name the file and, where it applies, the line:
 // missing files, malformed lines, non-increasing time stamps, missing or
-// unreadable images (checked when the source is built), a camera.yaml without
-// a required key.
+// unreadable images (checked when the source is built), a camera.yaml or
+// laser.yaml without a required key or with a value that is not finite.
+// With on_malformed: skip, malformed lines of frames.csv, odometry.csv and
+// laser.csv are skipped and counted instead (groundtruth.tum stays strict).
 //
 // The mounts of camera.yaml and laser.yaml are reported as recorded_mounts():
 // the run configuration's sensors.<name>.mount must repeat them, and the
@@ -50,6 +52,7 @@
 #include <vector>
 
 #include "camera_model.hpp"
+#include "mspace/records.hpp"
 #include "mspace/source.hpp"
 #include "odometry2d/planar_odometry.hpp"
 
@@ -73,11 +76,14 @@ struct StampedPose6 {
 
 /// camera.yaml → camera model (mount converted to a Pose6 in radians).
 camera::CameraModel read_camera_yaml(const std::string& path);
-/// frames.csv; image paths are joined to `folder`.
-std::vector<Frame> read_frames_csv(const std::string& path, const std::string& folder);
-/// odometry.csv.
-std::vector<StampedPose2> read_odometry_csv(const std::string& path);
-/// A TUM trajectory file (t x y z qx qy qz qw).
+/// frames.csv; image paths are joined to `folder`. Malformed lines (another
+/// width, a field that is not a finite number, a stamp not after the previous
+/// one) go to `malformed`: an error "file:line: problem" or a counted skip.
+std::vector<Frame> read_frames_csv(const std::string& path, const std::string& folder,
+                                   records::MalformedRecords& malformed);
+/// odometry.csv (malformed lines as read_frames_csv).
+std::vector<StampedPose2> read_odometry_csv(const std::string& path, records::MalformedRecords& malformed);
+/// A TUM trajectory file (t x y z qx qy qz qw); ground truth, so always strict.
 std::vector<StampedPose6> read_tum(const std::string& path);
 
 struct LaserScans {
@@ -88,8 +94,10 @@ struct LaserScans {
   std::vector<Eigen::VectorXd> ranges;  ///< one per scan
 };
 
-/// laser.yaml + laser.csv.
-LaserScans read_laser(const std::string& yaml_path, const std::string& csv_path);
+/// laser.yaml + laser.csv (malformed lines of laser.csv as read_frames_csv;
+/// a negative range is malformed too).
+LaserScans read_laser(const std::string& yaml_path, const std::string& csv_path,
+                      records::MalformedRecords& malformed);
 
 /// The increment x_d that planar_odometry::apply_increment turns `from` into
 /// `to` (both (x, y, θ)): the inverse of eq. 25's f.
@@ -106,11 +114,13 @@ class ImageSequence final : public DataSource {
 
   /// Reads and checks the whole folder (not the image pixels).
   ImageSequence(const std::string& folder, const std::string& channel,
-                Logger& log = null_logger(), const std::string& laser_channel = "laser");
+                Logger& log = null_logger(), const std::string& laser_channel = "laser",
+                const std::string& on_malformed = "error");
   explicit ImageSequence(const PluginArgs& args);
 
   bool next(DataStep& step) override;
   std::size_t size_hint() const override { return frames_.size(); }
+  std::size_t skipped_records() const override { return malformed_.skipped(); }
   Pose6 initial_pose() const override;
   /// The camera's mount (camera.yaml) on `channel`, the laser's (laser.yaml) on `laser_channel`.
   std::vector<RecordedMount> recorded_mounts() const override;
@@ -133,6 +143,7 @@ class ImageSequence final : public DataSource {
   std::vector<StampedPose6> ground_truth_;
   std::string laser_channel_;
   LaserScans laser_;
+  records::MalformedRecords malformed_;
   std::size_t next_frame_ = 0;
   std::size_t next_scan_ = 0;
   Eigen::Vector3d previous_odometry_ = Eigen::Vector3d::Zero();

@@ -14,40 +14,56 @@ namespace {
 
 double seconds_from_vehicle_ms(double t_ms) { return (t_ms - kClockOriginMs) / 1000.0; }
 
-/// Throws "file:line: time goes backwards" unless t ≥ previous.
-void check_time_order(const std::filesystem::path& file, const NumericRow& row, double t, double previous) {
-  if (t < previous) {
-    fail_at(file, row.line,
-            "time " + std::to_string(t) + " s goes backwards (previous " + std::to_string(previous) + " s)");
-  }
+/// "" when t may follow the previous time stamp of the same file, else the
+/// problem: time going backwards, or (unless `repeat_allowed`) a repeated time
+/// stamp, naming the previous record's line.
+std::string time_order_problem(double t, double previous, int previous_line, bool repeat_allowed = false) {
+  const std::string before = " (line " + std::to_string(previous_line) + ": " + std::to_string(previous) + " s)";
+  if (t < previous) return "time " + std::to_string(t) + " s goes backwards" + before;
+  if (t == previous && !repeat_allowed) return "time " + std::to_string(t) + " s repeats the previous record's" + before;
+  return {};
 }
 
 }  // namespace
 
-std::vector<DeadReckoningSample> read_dead_reckoning(const std::filesystem::path& file) {
+std::vector<DeadReckoningSample> read_dead_reckoning(const std::filesystem::path& file,
+                                                     records::MalformedRecords& malformed) {
   std::vector<DeadReckoningSample> out;
-  for (const NumericRow& row : read_numeric_table(file, 3, "time_ms speed_mps steering_rad")) {
+  int previous_line = 0;
+  for (const NumericRow& row : read_numeric_table(file, 3, "time_ms speed_mps steering_rad", malformed)) {
     const DeadReckoningSample s{seconds_from_vehicle_ms(row.values[0]), row.values[1], row.values[2]};
-    if (!out.empty()) check_time_order(file, row, s.t, out.back().t);
-    if (std::abs(s.steering) >= std::numbers::pi / 2) fail_at(file, row.line, "steering angle beyond ±90°");
+    std::string problem = out.empty() ? "" : time_order_problem(s.t, out.back().t, previous_line);
+    if (problem.empty() && std::abs(s.steering) >= std::numbers::pi / 2) problem = "steering angle beyond ±90°";
+    if (!problem.empty()) {
+      malformed.report(file.string(), row.line, problem);
+      continue;
+    }
     out.push_back(s);
+    previous_line = row.line;
   }
   return out;
 }
 
 std::vector<GpsFix> read_gps(const std::filesystem::path& file) {
+  records::MalformedRecords strict;  // ground truth: never skipped (records.hpp)
   std::vector<GpsFix> out;
-  for (const NumericRow& row : read_numeric_table(file, 3, "time_ms x_m y_m")) {
+  int previous_line = 0;
+  for (const NumericRow& row : read_numeric_table(file, 3, "time_ms x_m y_m", strict)) {
     const GpsFix fix{seconds_from_vehicle_ms(row.values[0]), row.values[1], row.values[2]};
-    if (!out.empty()) check_time_order(file, row, fix.t, out.back().t);
+    if (!out.empty()) {
+      const std::string problem = time_order_problem(fix.t, out.back().t, previous_line);
+      if (!problem.empty()) fail_at(file, row.line, problem);
+    }
     out.push_back(fix);
+    previous_line = row.line;
   }
   return out;
 }
 
-std::vector<Scan> read_detections(const std::filesystem::path& file) {
+std::vector<Scan> read_detections(const std::filesystem::path& file, records::MalformedRecords& malformed) {
   std::vector<Scan> out;
   std::vector<Eigen::Vector3d> rows;  // of the scan being read
+  int previous_line = 0;
   auto close_scan = [&] {
     if (rows.empty()) return;
     Scan& scan = out.back();
@@ -55,17 +71,24 @@ std::vector<Scan> read_detections(const std::filesystem::path& file) {
     for (std::size_t i = 0; i < rows.size(); ++i) scan.detections.row(static_cast<Eigen::Index>(i)) = rows[i];
     rows.clear();
   };
-  for (const NumericRow& row : read_numeric_table(file, 4, "t_s range_m bearing_rad diameter_m")) {
+  for (const NumericRow& row :
+       read_numeric_table(file, 4, "t_s range_m bearing_rad diameter_m", malformed)) {
     const double t = row.values[0], range = row.values[1], bearing = row.values[2], diameter = row.values[3];
-    if (range <= 0.0 || diameter <= 0.0) fail_at(file, row.line, "range and diameter must be positive");
-    if (bearing < 0.0 || bearing > std::numbers::pi) fail_at(file, row.line, "bearing outside [0, pi]");
+    // Consecutive lines with one time stamp are the trunks of one scan.
+    std::string problem = out.empty() ? "" : time_order_problem(t, out.back().t, previous_line, true);
+    if (problem.empty() && (range <= 0.0 || diameter <= 0.0)) problem = "range and diameter must be positive";
+    if (problem.empty() && (bearing < 0.0 || bearing > std::numbers::pi)) problem = "bearing outside [0, pi]";
+    if (!problem.empty()) {
+      malformed.report(file.string(), row.line, problem);
+      continue;
+    }
     if (out.empty() || t != out.back().t) {
-      if (!out.empty()) check_time_order(file, row, t, out.back().t);
       close_scan();
       out.push_back(Scan{t, {}});
     }
     // The file's bearing is 0 at the vehicle's right, π/2 straight ahead.
     rows.emplace_back(range, bearing - std::numbers::pi / 2, diameter);
+    previous_line = row.line;
   }
   close_scan();
   return out;
@@ -119,32 +142,37 @@ std::vector<ParamSpec> VictoriaParkSource::param_specs() {
                    "GPS fixes with no other fix within this many seconds are not used as ground truth (the "
                    "failing unit's jumps are there, one 141 m off); 0 keeps every fix",
                    0.0),
+      records::on_malformed_param(),
   };
 }
 
 VictoriaParkSource::VictoriaParkSource(const PluginArgs& args)
     : VictoriaParkSource(expand_environment(args.params.get_string("data_dir")),
-                         args.params.get_string("channel"), args.params.get_double("gps_isolated_gap")) {
+                         args.params.get_string("channel"), args.params.get_double("gps_isolated_gap"),
+                         args.params.get_string("on_malformed")) {
+  if (malformed_.skipped() > 0)
+    args.log().warn("victoria_park: skipped ", malformed_.skipped(), " malformed record(s); the first: ",
+                    malformed_.first_problem());
   args.log().info("victoria_park: ", dr_.size(), " dead-reckoning samples, ", scans_.size(), " scans, ",
                   gps_.size(), " GPS fixes (", isolated_fixes_, " isolated ones left out), ", times_.size(),
                   " steps");
 }
 
 VictoriaParkSource::VictoriaParkSource(const std::filesystem::path& data_dir, std::string channel,
-                                       double isolated_gap)
-    : channel_(std::move(channel)) {
+                                       double isolated_gap, const std::string& on_malformed)
+    : channel_(std::move(channel)), malformed_(on_malformed) {
   if (!std::filesystem::is_directory(data_dir)) {
     throw std::runtime_error("victoria_park: data directory '" + data_dir.string() + "' does not exist (working " +
                              "directory " + std::filesystem::current_path().string() + ")");
   }
-  dr_ = read_dead_reckoning(data_dir / "text" / "aa3_dr.txt");
+  dr_ = read_dead_reckoning(data_dir / "text" / "aa3_dr.txt", malformed_);
   gps_ = read_gps(data_dir / "text" / "aa3_gpsx.txt");
   if (isolated_gap > 0.0) {
     const std::size_t all = gps_.size();
     gps_ = without_isolated_fixes(gps_, isolated_gap);
     isolated_fixes_ = all - gps_.size();
   }
-  scans_ = read_detections(data_dir / "rfs_slam" / "measurements.dat");
+  scans_ = read_detections(data_dir / "rfs_slam" / "measurements.dat", malformed_);
   merge_times();
 }
 

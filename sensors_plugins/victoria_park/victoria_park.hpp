@@ -39,6 +39,7 @@
 
 #include "mspace/params.hpp"
 #include "mspace/plugin.hpp"
+#include "mspace/records.hpp"
 #include "mspace/source.hpp"
 
 namespace mspace::victoria_park {
@@ -63,12 +64,16 @@ struct Scan {
   Eigen::MatrixXd detections;  ///< rows (range m, bearing rad in the mspace sensor frame, diameter m)
 };
 
-/// The three files in the second clock, each in time order. Throws
-/// std::runtime_error "file:line: problem" for malformed lines and times
-/// that go backwards.
-std::vector<DeadReckoningSample> read_dead_reckoning(const std::filesystem::path& file);
+/// The three files in the second clock, each in time order. A malformed line
+/// (not exactly its columns of finite numbers, a value out of range, time
+/// going backwards, or a time stamp repeated — except that consecutive
+/// detection lines with one time stamp are one scan) is reported to
+/// `malformed` (an error "file:line: problem", or a counted skip). The GPS is
+/// ground truth and always strict (mspace/records.hpp).
+std::vector<DeadReckoningSample> read_dead_reckoning(const std::filesystem::path& file,
+                                                     records::MalformedRecords& malformed);
 std::vector<GpsFix> read_gps(const std::filesystem::path& file);
-std::vector<Scan> read_detections(const std::filesystem::path& file);
+std::vector<Scan> read_detections(const std::filesystem::path& file, records::MalformedRecords& malformed);
 
 /// The fixes that have another fix at most `max_gap` seconds before or after
 /// them. The GPS unit was failing (67 gaps longer than 2 s, jumps): a fix
@@ -82,7 +87,7 @@ std::string expand_environment(const std::string& text);
 
 class VictoriaParkSource final : public DataSource {
  public:
-  /// data_dir, channel, gps_isolated_gap.
+  /// data_dir, channel, gps_isolated_gap, on_malformed.
   static std::vector<ParamSpec> param_specs();
 
   /// Reads all three files; throws std::runtime_error naming the missing
@@ -90,10 +95,12 @@ class VictoriaParkSource final : public DataSource {
   explicit VictoriaParkSource(const PluginArgs& args);
   /// `isolated_gap` > 0: GPS fixes with no other fix within that many seconds
   /// are not delivered (see without_isolated_fixes).
-  VictoriaParkSource(const std::filesystem::path& data_dir, std::string channel, double isolated_gap = 0.0);
+  VictoriaParkSource(const std::filesystem::path& data_dir, std::string channel, double isolated_gap = 0.0,
+                     const std::string& on_malformed = "error");
 
   bool next(DataStep& step) override;
   std::size_t size_hint() const override { return times_.size(); }
+  std::size_t skipped_records() const override { return malformed_.skipped(); }
 
   const std::vector<DeadReckoningSample>& dead_reckoning() const { return dr_; }
   /// The GPS fixes delivered as ground truth.
@@ -106,6 +113,7 @@ class VictoriaParkSource final : public DataSource {
   void merge_times();
 
   std::string channel_;
+  records::MalformedRecords malformed_;
   std::vector<DeadReckoningSample> dr_;
   std::vector<GpsFix> gps_;
   std::size_t isolated_fixes_ = 0;

@@ -108,7 +108,8 @@ TEST(CarmenLog, GMappingVariantUsesCorrectedPoseAsGroundTruth) {
 TEST(CarmenLog, MalformedLineIsAnErrorOrACountedSkip) {
   const std::string good = "1.0 0 0 0 0 0 0 " + ranges(180, "2.0") + "\n";
   const std::string bad = "2.0 0 0 0 0 0 0 " + ranges(179, "2.0") + "oops\n";
-  const auto file = write_temp("mspace_test_table.txt", "# table\n" + good + bad + good);
+  const std::string later = "3.0 0 0 0 0 0 0 " + ranges(180, "2.0") + "\n";  // a repeated stamp is malformed too
+  const auto file = write_temp("mspace_test_table.txt", "# table\n" + good + bad + later);
   try {
     CarmenLogSource source(args_for(file));
     FAIL() << "expected an error";

@@ -1,6 +1,7 @@
 // End-to-end tests of the kernel on the built-in simulated world
 // (config/sim_points.yaml): accuracy against ground truth, consistency of the
-// filter over many seeds, the outputs of a run, and a plugin returning NaN.
+// filter over many seeds, the outputs of a run, a plugin returning NaN, and
+// the numerical health checks with an estimator broken on purpose.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -517,6 +518,19 @@ TEST_F(SimRun, GroundTruthAtASensorUsesItsMount) {
   EXPECT_LT(at_sensor.summary.errors->ate_rmse, 0.5 + at_robot.summary.errors->ate_rmse);
 }
 
+/// Runs to the end with every output written; the message of the PluginError
+/// that must stop the run ("(no error)" when none does).
+std::string plugin_error_of(Slam& slam) {
+  RunOptions options;
+  options.progress = false;
+  try {
+    run_to_end(slam, options);
+  } catch (const PluginError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
 // A plugin that hands back NaN stops the run with an error naming the
 // instance and the plugin, and the steps computed before are not lost.
 TEST_F(SimRun, NanFromAPluginIsAnErrorAndKeepsWhatWasComputed) {
@@ -525,19 +539,92 @@ TEST_F(SimRun, NanFromAPluginIsAnErrorAndKeepsWhatWasComputed) {
   c.sensors[0].extractor.params = Params();
   c.sensors[0].extractor.params.set("clean_readings", std::int64_t{50});
   Slam slam(c, registry_);
-  RunOptions options;
-  options.progress = false;
-  try {
-    run_to_end(slam, options);
-    FAIL() << "expected a PluginError";
-  } catch (const PluginError& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find("laser"), std::string::npos) << what;
-    EXPECT_NE(what.find("nan_extractor"), std::string::npos) << what;
-    EXPECT_NE(what.find("NaN"), std::string::npos) << what;
-  }
+  const std::string what = plugin_error_of(slam);
+  EXPECT_NE(what.find("laser"), std::string::npos) << what;
+  EXPECT_NE(what.find("nan_extractor"), std::string::npos) << what;
+  EXPECT_NE(what.find("NaN"), std::string::npos) << what;
   EXPECT_EQ(lines_of(out_ / "trajectory.tum").size(), 50u);
   EXPECT_TRUE(std::filesystem::exists(out_ / "summary.yaml"));
+}
+
+// Numerical health (issue 11 item 7): an estimator that throws, returns NaN
+// or a matrix of the wrong size midway stops the run with an error naming
+// the instance and the plugin, and every output of the steps before is
+// written, the summary saying what stopped the run.
+struct BrokenCase {
+  const char* mode;
+  const char* says;  ///< in the error
+};
+
+class BrokenEstimatorRun : public SimRun, public ::testing::WithParamInterface<BrokenCase> {};
+
+TEST_P(BrokenEstimatorRun, StopsNamingThePluginAndKeepsTheOutputs) {
+  RunConfig c = config();
+  c.estimator.plugin = "broken_estimator";
+  c.estimator.params = Params();
+  c.estimator.params.set("mode", std::string(GetParam().mode));
+  c.estimator.params.set("fail_at", std::int64_t{30});
+  Slam slam(c, registry_);
+  const std::string what = plugin_error_of(slam);
+  EXPECT_NE(what.find(c.estimator.instance + " (plugin 'broken_estimator'"), std::string::npos) << what;
+  EXPECT_NE(what.find(GetParam().says), std::string::npos) << what;
+  ASSERT_GT(slam.steps_done(), 30);  // 30 updates came first
+  // Every step before the failing one is in the trajectory.
+  EXPECT_EQ(lines_of(out_ / "trajectory.tum").size(), static_cast<std::size_t>(slam.steps_done() - 1));
+  EXPECT_TRUE(std::filesystem::exists(out_ / "map.yaml"));
+  const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
+  EXPECT_NE(summary["stopped_by_error"].as<std::string>().find("broken_estimator"), std::string::npos);
+  EXPECT_EQ(summary["steps"].as<long long>(), slam.steps_done());
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Modes, BrokenEstimatorRun,
+    ::testing::Values(BrokenCase{"throw", "update failed: deliberately broken at update 30"},
+                      BrokenCase{"nan", "state perturbation contains NaN or infinity"},
+                      BrokenCase{"wrong_size", "update returned a state perturbation of size"},
+                      BrokenCase{"marginal_wrong_size", "marginal returned a "},
+                      BrokenCase{"nan_covariance", "the covariance (marginal) contains NaN or infinity"}),
+    [](const ::testing::TestParamInfo<BrokenCase>& info) { return std::string(info.param.mode); });
+
+// A covariance that is not positive definite (reported so once, after update
+// 30) is a health figure, not a crash: the block check after that update
+// finds it, the run goes on and the summary reports it.
+TEST_F(SimRun, CovarianceThatIsNotPositiveDefiniteIsReported) {
+  RunConfig c = config();
+  c.max_steps = 1500;
+  c.health_check_every = 500;
+  c.estimator.plugin = "broken_estimator";
+  c.estimator.params = Params();
+  c.estimator.params.set("mode", std::string("indefinite"));
+  c.estimator.params.set("fail_at", std::int64_t{30});
+  const RunResult broken = run(c, true);
+  const CovarianceHealthReport& h = broken.summary.covariance_health;
+  EXPECT_EQ(h.blocks_not_pd, 1);
+  EXPECT_GT(h.first_not_pd_step, 0);
+  EXPECT_GT(h.block_checks, 1000);
+  const YAML::Node summary = YAML::LoadFile((out_ / "summary.yaml").string());
+  EXPECT_EQ(summary["covariance_health"]["touched_blocks_not_positive_definite"].as<long long>(), 1);
+  EXPECT_EQ(summary["covariance_health"]["first_not_positive_definite_step"].as<long long>(), h.first_not_pd_step);
+}
+
+// The healthy EKF on the same data: every block positive definite, the whole
+// covariance checked every 500 steps and at the end, symmetric (the EKF keeps
+// one triangle) with a positive smallest eigenvalue.
+TEST_F(SimRun, HealthyEkfCovarianceIsReportedPositiveDefinite) {
+  RunConfig c = config();
+  c.max_steps = 1500;
+  c.health_check_every = 500;
+  const RunResult r = run(c);
+  const CovarianceHealthReport& h = r.summary.covariance_health;
+  EXPECT_EQ(h.blocks_not_pd, 0);
+  EXPECT_GT(h.block_checks, 1000);
+  EXPECT_EQ(h.full_checks, 3);
+  EXPECT_GT(h.min_eigenvalue, 0.0);
+  EXPECT_GT(h.min_eigenvalue_step, 0);
+  EXPECT_EQ(h.max_asymmetry, 0.0);
+  ASSERT_TRUE(r.summary.final_covariance);
+  EXPECT_GT(r.summary.final_covariance->min_eigenvalue, 0.0);
+  EXPECT_GE(r.summary.final_covariance->max_eigenvalue, r.summary.final_covariance->min_eigenvalue);
 }
 
 }  // namespace
