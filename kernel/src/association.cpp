@@ -603,7 +603,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
       A.rightCols(dim) = J_of * Bd;
       idx.insert(idx.end(), mf.state_idx.begin(), mf.state_idx.end());
     }
-    Eigen::MatrixXd M = A * map.estimator.marginal(idx) * A.transpose();
+    Eigen::MatrixXd M = A * map.marginal(idx) * A.transpose();
     const Eigen::MatrixXd gate_cov =
         guarded(type.instance, *type.library, "gating_covariance", [&] { return f.gating_covariance(); });
     if (gate_cov.size() > 0) M += J_of * gate_cov * J_of.transpose();
@@ -662,8 +662,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   std::vector<int> chosen;
   if (joint) {
     ++stats_.jcbb_readings;
-    const MarginalFn marginal = [&](const std::vector<int>& rows) { return map.estimator.marginal(rows); };
-    const JcbbResult jc = joint_compatibility(candidates, marginal, {ac.gate_probability, ac.jcbb_max_nodes, &joint_chi2_});
+    const JcbbResult jc = joint_compatibility(candidates, map.marginal, {ac.gate_probability, ac.jcbb_max_nodes, &joint_chi2_});
     stats_.jcbb_nodes += jc.nodes;
     if (jc.bounded) {
       ++stats_.jcbb_bounded;
