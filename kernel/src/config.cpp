@@ -149,6 +149,8 @@ class Reader {
   std::int64_t integer(const Item& item, double min = -kInf, double max = kInf) const;
   bool boolean(const Item& item) const;
   double probability(const Item& item) const;
+  /// The position of the item's text in `choices`; an error naming them otherwise.
+  std::size_t choice(const Item& item, const std::vector<std::string>& choices) const;
   std::vector<double> numbers(const Item& item, int size, double min = -kInf, double max = kInf) const;
   std::vector<std::string> texts(const Item& item) const;
   Pose6 pose(const Item& item, double min = -kInf) const;
@@ -252,6 +254,13 @@ bool Reader::boolean(const Item& item) const {
   const std::optional<bool> v = convert<bool>(item.node);
   if (!v) fail(item, "expected true or false, got " + describe(item.node));
   return *v;
+}
+
+std::size_t Reader::choice(const Item& item, const std::vector<std::string>& choices) const {
+  const std::string value = text(item);
+  const auto it = std::find(choices.begin(), choices.end(), value);
+  if (it == choices.end()) fail(item, "'" + value + "' is not one of: " + join(choices));
+  return static_cast<std::size_t>(it - choices.begin());
 }
 
 double Reader::probability(const Item& item) const {
@@ -401,22 +410,9 @@ MapConfig Reader::read_map(const Item* item) const {
     map.load = text(*f);
     if (map.load.empty()) fail(*f, "the map folder is empty");
   }
-  if (const Item* f = find(fields, "mode")) {
-    const std::string mode = text(*f);
-    if (mode == "mapping")
-      map.mode = MapConfig::Mode::Mapping;
-    else if (mode == "localize")
-      map.mode = MapConfig::Mode::Localize;
-    else if (mode == "extend")
-      map.mode = MapConfig::Mode::Extend;
-    else
-      fail(*f, "'" + mode + "' is not one of: " + join(kMapModes));
-  }
-  if (const Item* f = find(fields, "start")) {
-    const std::string start = text(*f);
-    if (start != "config" && start != "map_end") fail(*f, "'" + start + "' is not one of: " + join(kMapStarts));
-    map.start_at_map_end = start == "map_end";
-  }
+  constexpr MapConfig::Mode kModes[] = {MapConfig::Mode::Mapping, MapConfig::Mode::Localize, MapConfig::Mode::Extend};
+  if (const Item* f = find(fields, "mode")) map.mode = kModes[choice(*f, kMapModes)];
+  if (const Item* f = find(fields, "start")) map.start_at_map_end = choice(*f, kMapStarts) == 1;
   std::string problem = map_config_problem(map);
   if (!problem.empty()) fail(*item, problem);
   return map;
@@ -469,15 +465,9 @@ AssociationConfig Reader::read_association(const Item* item) const {
   if (const Item* f = find(fields, "tentative_max_age"))
     association.tentative_max_age = static_cast<int>(integer(*f, 1, std::numeric_limits<int>::max()));
   if (const Item* f = find(fields, "join_distance")) association.join_distance = number(*f, 0.0);
-  if (const Item* f = find(fields, "method")) {
-    const std::string method = text(*f);
-    if (method == "nearest_neighbour")
-      association.method = AssociationConfig::Method::NearestNeighbour;
-    else if (method == "jcbb")
-      association.method = AssociationConfig::Method::Jcbb;
-    else
-      fail(*f, "'" + method + "' is not one of: " + join(kAssociationMethods));
-  }
+  if (const Item* f = find(fields, "method"))
+    association.method = choice(*f, kAssociationMethods) == 1 ? AssociationConfig::Method::Jcbb
+                                                              : AssociationConfig::Method::NearestNeighbour;
   if (const Item* f = find(fields, "jcbb_max_nodes")) association.jcbb_max_nodes = integer(*f, 1);
   if (const Item* f = find(fields, "spatial_index")) association.spatial_index = boolean(*f);
   if (const Item* f = find(fields, "index_cell_size")) association.index_cell_size = number(*f, 0.0);
@@ -512,11 +502,7 @@ OutputConfig Reader::read_output(const Item* item, const std::string& run_name) 
   if (const Item* f = find(fields, "picture")) output.picture = boolean(*f);
   if (const Item* f = find(fields, "picture_size")) output.picture_size = static_cast<int>(integer(*f, 64, 20000));
   if (const Item* f = find(fields, "robot_frame")) output.robot_frame = text(*f);
-  if (const Item* f = find(fields, "map_covariance")) {
-    const std::string kind = text(*f);
-    if (kind != "joint" && kind != "marginal") fail(*f, "'" + kind + "' is not one of: joint, marginal");
-    output.map_joint_covariance = kind == "joint";
-  }
+  if (const Item* f = find(fields, "map_covariance")) output.map_joint_covariance = choice(*f, {"joint", "marginal"}) == 0;
   if (const Item* g = find(fields, "grid")) {
     const std::vector<Item> grid = entries(*g, &kGridKeys);
     if (const Item* f = find(grid, "enabled")) output.grid.enabled = boolean(*f);
