@@ -151,7 +151,7 @@ TEST(Config, UnknownKeysListTheAllowedOnes) {
   EXPECT_EQ(config_error(edited("    mount:", "    mounts:")),
             "test.yaml:16:5: sensors.laser.mounts: unknown key (allowed: channel, mount, extractor, feeds, max_range, silent_readings)");
   EXPECT_EQ(config_error(edited("  name: t1\n", "  name: t1\n  speed: 3\n")),
-            "test.yaml:3:3: run.speed: unknown key (allowed: name, log_level, max_steps, checkpoint_every, plugin_path, seed)");
+            "test.yaml:3:3: run.speed: unknown key (allowed: name, log_level, max_steps, checkpoint_every, plugin_path, seed, skip_steps)");
 }
 
 TEST(Config, DuplicateKeyIsAnError) {

@@ -232,7 +232,7 @@ TEST_F(SimRun, InterruptionWritesTheOutputsOfTheStepsProcessed) {
 }
 
 // The same through the command line: `mspace run` on a long simulated run,
-// SIGTERM after a second, exits with 143 and writes the outputs.
+// SIGTERM once it is running, exits with 143 and writes the outputs.
 TEST_F(SimRun, TheCommandLineExitsWith143OnSigtermAndWritesTheOutputs) {
   const std::filesystem::path long_config = out_.parent_path() / "long_sim.yaml";
   std::filesystem::create_directories(out_);
@@ -252,7 +252,12 @@ TEST_F(SimRun, TheCommandLineExitsWith143OnSigtermAndWritesTheOutputs) {
           "--plugin-dir", MSPACE_PLUGIN_DIR, static_cast<char*>(nullptr));
     _exit(98);
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  // SIGTERM once the run is under way: its handlers are installed before the
+  // partial trajectory is opened (on a loaded machine starting up alone can
+  // take longer than a fixed wait).
+  for (int i = 0; i < 600 && !std::filesystem::exists(out_ / "trajectory.partial.tum"); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
   kill(pid, SIGTERM);
   int status = 0;
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
