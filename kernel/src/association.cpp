@@ -634,7 +634,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
       A.rightCols(dim).noalias() = J_of * Bd;
       idx.insert(idx.end(), mf.state_idx.begin(), mf.state_idx.end());
     }
-    scratch_AP_.noalias() = A * map.estimator.marginal(idx);
+    scratch_AP_.noalias() = A * map.marginal(idx);
     M.noalias() = scratch_AP_ * A.transpose();
     const Eigen::MatrixXd gate_cov =
         guarded(type.instance, *type.library, "gating_covariance", [&] { return f.gating_covariance(); });
@@ -693,8 +693,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   std::vector<int> chosen;
   if (joint) {
     ++stats_.jcbb_readings;
-    const MarginalFn marginal = [&](const std::vector<int>& rows) { return map.estimator.marginal(rows); };
-    const JcbbResult jc = joint_compatibility(candidates, marginal, {ac.gate_probability, ac.jcbb_max_nodes, &joint_chi2_});
+    const JcbbResult jc = joint_compatibility(candidates, map.marginal, {ac.gate_probability, ac.jcbb_max_nodes, &joint_chi2_});
     stats_.jcbb_nodes += jc.nodes;
     if (jc.bounded) {
       ++stats_.jcbb_bounded;

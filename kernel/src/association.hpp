@@ -148,7 +148,9 @@ class PlanarGrid {
 struct AssociationView {
   const std::vector<MapFeature>& features;
   const std::vector<FeatureTypeSlot>& types;
-  const Estimator& estimator;
+  /// Covariance of state rows: the estimator's (Estimator::marginal), or in
+  /// localize mode the robot's with the loaded map's (Slam::state_covariance).
+  MarginalFn marginal;
   const std::vector<int>& robot_idx;  ///< estimator rows of the robot pose
   std::int64_t step = 0;
 };

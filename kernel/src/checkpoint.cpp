@@ -184,21 +184,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
   }
 
   // 1. The features, all or nothing, through their plugins' restore().
-  std::vector<RestoredFeature> restored = restore_features(map, file, types_);
-  std::vector<MapFeature> features;
-  features.reserve(restored.size());
-  for (std::size_t i = 0; i < restored.size(); ++i) {
-    const StoredFeature& sf = map.features[i];
-    MapFeature mf;
-    mf.id = static_cast<int>(sf.id);
-    mf.type = restored[i].type;
-    mf.feature = std::move(restored[i].feature);
-    static_cast<FeatureBookkeeping&>(mf) = sf;
-    if (mf.last_sensor < 0 || mf.last_sensor >= static_cast<int>(sensors_.size()))
-      throw PersistenceError(file, "its last sensor " + std::to_string(mf.last_sensor) + " is not in the run", sf.id,
-                             types_[static_cast<std::size_t>(mf.type)].plugin);
-    features.push_back(std::move(mf));
-  }
+  std::vector<MapFeature> features = restored_features(map, file);
   std::vector<SharedCoordinate> shared;
   for (const StoredShared& s : map.shared) shared.push_back({s.id, s.kind, s.state_idx, s.members});
 

@@ -27,10 +27,13 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr int kFirstAngle = kTheta;
 
 const std::vector<std::string> kTopKeys = {"run",         "source",       "motion", "estimator", "features", "sensors",
-                                           "association", "initial_pose", "output", "evaluation"};
+                                           "association", "initial_pose", "output", "evaluation", "map"};
 const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor"};
-const std::vector<std::string> kRunKeys = {"name", "log_level", "max_steps", "checkpoint_every", "health_check_every",
-                                            "plugin_path", "seed"};
+const std::vector<std::string> kRunKeys = {"name",       "log_level", "max_steps", "checkpoint_every",
+                                           "health_check_every", "plugin_path", "seed", "skip_steps"};
+const std::vector<std::string> kMapKeys = {"load", "mode", "start"};
+const std::vector<std::string> kMapModes = {"mapping", "localize", "extend"};
+const std::vector<std::string> kMapStarts = {"config", "map_end"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
                                                    "join_distance", "method", "jcbb_max_nodes", "spatial_index",
@@ -41,7 +44,8 @@ const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feat
 const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir",     "trajectory",   "map",         "summary",
-                                              "picture", "picture_size", "robot_frame", "grid"};
+                                              "picture", "picture_size", "robot_frame", "grid",
+                                              "map_covariance"};
 const std::vector<std::string> kGridKeys = {"enabled", "resolution", "max_range"};
 
 std::string join(const std::vector<std::string>& items) {
@@ -152,6 +156,8 @@ class Reader {
   std::int64_t integer(const Item& item, double min = -kInf, double max = kInf) const;
   bool boolean(const Item& item) const;
   double probability(const Item& item) const;
+  /// The position of the item's text in `choices`; an error naming them otherwise.
+  std::size_t choice(const Item& item, const std::vector<std::string>& choices) const;
   std::vector<double> numbers(const Item& item, int size, double min = -kInf, double max = kInf) const;
   std::vector<std::string> texts(const Item& item) const;
   Pose6 pose(const Item& item, double min = -kInf) const;
@@ -171,6 +177,7 @@ class Reader {
   AssociationConfig read_association(const Item* item) const;
   void read_initial_pose(const Item* item, RunConfig& config) const;
   OutputConfig read_output(const Item* item, const std::string& run_name) const;
+  MapConfig read_map(const Item* item) const;
   EvaluationConfig read_evaluation(const Item* item, const std::vector<SensorConfig>& sensors) const;
 
   /// The --set assignment that gave `key` (or a map above it), or nullptr.
@@ -288,6 +295,13 @@ bool Reader::boolean(const Item& item) const {
   const std::optional<bool> v = convert<bool>(value);
   if (!v) fail(item, "expected true or false, got " + describe_scalar(item, value));
   return *v;
+}
+
+std::size_t Reader::choice(const Item& item, const std::vector<std::string>& choices) const {
+  const std::string value = text(item);
+  const auto it = std::find(choices.begin(), choices.end(), value);
+  if (it == choices.end()) fail(item, "'" + value + "' is not one of: " + join(choices));
+  return static_cast<std::size_t>(it - choices.begin());
 }
 
 double Reader::probability(const Item& item) const {
@@ -427,6 +441,23 @@ void Reader::read_run(const Item* item, RunConfig& config) const {
   if (const Item* f = find(fields, "health_check_every")) config.health_check_every = integer(*f, 0);
   if (const Item* f = find(fields, "plugin_path")) config.plugin_path = texts(*f);
   if (const Item* f = find(fields, "seed")) config.seed = integer(*f);
+  if (const Item* f = find(fields, "skip_steps")) config.skip_steps = integer(*f, 0);
+}
+
+MapConfig Reader::read_map(const Item* item) const {
+  MapConfig map;
+  if (item == nullptr) return map;
+  const std::vector<Item> fields = entries(*item, &kMapKeys);
+  if (const Item* f = find(fields, "load")) {
+    map.load = text(*f);
+    if (map.load.empty()) fail(*f, "the map folder is empty");
+  }
+  constexpr MapConfig::Mode kModes[] = {MapConfig::Mode::Mapping, MapConfig::Mode::Localize, MapConfig::Mode::Extend};
+  if (const Item* f = find(fields, "mode")) map.mode = kModes[choice(*f, kMapModes)];
+  if (const Item* f = find(fields, "start")) map.start_at_map_end = choice(*f, kMapStarts) == 1;
+  std::string problem = map_config_problem(map);
+  if (!problem.empty()) fail(*item, problem);
+  return map;
 }
 
 std::vector<InstanceConfig> Reader::read_features(const Item& item) const {
@@ -476,15 +507,9 @@ AssociationConfig Reader::read_association(const Item* item) const {
   if (const Item* f = find(fields, "tentative_max_age"))
     association.tentative_max_age = static_cast<int>(integer(*f, 1, std::numeric_limits<int>::max()));
   if (const Item* f = find(fields, "join_distance")) association.join_distance = number(*f, 0.0);
-  if (const Item* f = find(fields, "method")) {
-    const std::string method = text(*f);
-    if (method == "nearest_neighbour")
-      association.method = AssociationConfig::Method::NearestNeighbour;
-    else if (method == "jcbb")
-      association.method = AssociationConfig::Method::Jcbb;
-    else
-      fail(*f, "'" + method + "' is not one of: " + join(kAssociationMethods));
-  }
+  if (const Item* f = find(fields, "method"))
+    association.method = choice(*f, kAssociationMethods) == 1 ? AssociationConfig::Method::Jcbb
+                                                              : AssociationConfig::Method::NearestNeighbour;
   if (const Item* f = find(fields, "jcbb_max_nodes")) association.jcbb_max_nodes = integer(*f, 1);
   if (const Item* f = find(fields, "spatial_index")) association.spatial_index = boolean(*f);
   if (const Item* f = find(fields, "index_cell_size")) association.index_cell_size = number(*f, 0.0);
@@ -519,6 +544,7 @@ OutputConfig Reader::read_output(const Item* item, const std::string& run_name) 
   if (const Item* f = find(fields, "picture")) output.picture = boolean(*f);
   if (const Item* f = find(fields, "picture_size")) output.picture_size = static_cast<int>(integer(*f, 64, 20000));
   if (const Item* f = find(fields, "robot_frame")) output.robot_frame = text(*f);
+  if (const Item* f = find(fields, "map_covariance")) output.map_joint_covariance = choice(*f, {"joint", "marginal"}) == 0;
   if (const Item* g = find(fields, "grid")) {
     const std::vector<Item> grid = entries(*g, &kGridKeys);
     if (const Item* f = find(grid, "enabled")) output.grid.enabled = boolean(*f);
@@ -573,6 +599,7 @@ RunConfig Reader::read_document(const YAML::Node& root) {
   read_initial_pose(find(sections, "initial_pose"), config);
   config.output = read_output(find(sections, "output"), config.name);
   config.evaluation = read_evaluation(find(sections, "evaluation"), config.sensors);
+  config.map = read_map(find(sections, "map"));
   return config;
 }
 
@@ -632,7 +659,15 @@ void emit_run(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "plugin_path" << YAML::Value;
   emit_string_list(out, c.plugin_path);
   if (c.seed) out << YAML::Key << "seed" << YAML::Value << std::to_string(*c.seed);
+  if (c.skip_steps > 0) out << YAML::Key << "skip_steps" << YAML::Value << std::to_string(c.skip_steps);
   out << YAML::EndMap;
+  if (!c.map.load.empty() || c.map.mode != MapConfig::Mode::Mapping) {
+    out << YAML::Key << "map" << YAML::Value << YAML::BeginMap;
+    if (!c.map.load.empty()) out << YAML::Key << "load" << YAML::Value << c.map.load;
+    out << YAML::Key << "mode" << YAML::Value << map_mode_name(c.map.mode);
+    out << YAML::Key << "start" << YAML::Value << (c.map.start_at_map_end ? "map_end" : "config");
+    out << YAML::EndMap;
+  }
 }
 
 void emit_sensors(YAML::Emitter& out, const std::vector<SensorConfig>& sensors) {
@@ -687,6 +722,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "summary" << YAML::Value << yes_no(c.output.summary);
   out << YAML::Key << "picture" << YAML::Value << yes_no(c.output.picture);
   out << YAML::Key << "picture_size" << YAML::Value << std::to_string(c.output.picture_size);
+  out << YAML::Key << "map_covariance" << YAML::Value << (c.output.map_joint_covariance ? "joint" : "marginal");
   if (!c.output.robot_frame.empty()) out << YAML::Key << "robot_frame" << YAML::Value << c.output.robot_frame;
   out << YAML::Key << "grid" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "enabled" << YAML::Value << yes_no(c.output.grid.enabled);
@@ -724,7 +760,30 @@ std::vector<std::string> accepted_keys() {
   add("output.", kOutputKeys);
   add("output.grid.", kGridKeys);
   add("evaluation.", kEvaluationKeys);
+  add("map.", kMapKeys);
   return keys;
+}
+
+const char* map_mode_name(MapConfig::Mode mode) {
+  switch (mode) {
+    case MapConfig::Mode::Localize:
+      return "localize";
+    case MapConfig::Mode::Extend:
+      return "extend";
+    case MapConfig::Mode::Mapping:
+      break;
+  }
+  return "mapping";
+}
+
+std::string map_config_problem(const MapConfig& map) {
+  if (map.mode != MapConfig::Mode::Mapping && map.load.empty())
+    return std::string("mode '") + map_mode_name(map.mode) + "' needs the map to load (map.load / --map DIR)";
+  if (map.mode == MapConfig::Mode::Mapping && !map.load.empty())
+    return "a mapping run starts from an empty map; to map on from '" + map.load +
+           "' give mode: extend (or --mode extend), to localize in it mode: localize";
+  if (map.start_at_map_end && map.load.empty()) return "start: map_end needs a map to load";
+  return {};
 }
 
 const char* association_method_name(AssociationConfig::Method method) {

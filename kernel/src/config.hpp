@@ -3,7 +3,10 @@
 // Layout of a run file (every key is optional unless marked required):
 //
 //   run:          {name, log_level: info, max_steps: 0 (= all), checkpoint_every: 0 (steps; 0 = none),
-//                  health_check_every: 0 (steps; 0 = at the end only), plugin_path: [dirs], seed}
+//                  health_check_every: 0 (steps; 0 = at the end only), plugin_path: [dirs], seed,
+//                  skip_steps: 0 (data steps discarded before the first)}
+//   map:          {load: <map folder or map.bin>, mode: mapping | localize | extend,
+//                  start: config | map_end}                                  # docs/maps.md
 //   source:       {plugin: <name>, <parameters>}                        # required
 //   motion:       {plugin: <name>, <parameters>}                        # required
 //   estimator:    {plugin: <name>, <parameters>}                        # required
@@ -22,6 +25,7 @@
 //                  spatial_index: true, index_cell_size: 0 (m; 0 = the largest sensor max_range)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
 //   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000,
+//                  map_covariance: joint | marginal,
 //                  robot_frame: <text for the pose files' headers>,
 //                  grid: {enabled: true, resolution: 0.05, max_range: 20}}
 //   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>}
@@ -148,8 +152,30 @@ struct OutputConfig {
   /// What the robot pose is, named in the header of every pose file (e.g.
   /// "rear-axle centre"); empty: "robot base".
   std::string robot_frame;
+  /// map.bin holds the joint covariance of the map (`joint`, what `extend`
+  /// needs) or only each feature's marginal (`marginal`, enough to `localize`).
+  bool map_joint_covariance = true;
   GridConfig grid;
 };
+
+/// What a run does with a saved map (docs/maps.md): modes of the one loop.
+struct MapConfig {
+  enum class Mode {
+    Mapping,   ///< start from an empty map (the default)
+    Localize,  ///< the loaded map is read-only: only the robot is estimated
+    Extend,    ///< the loaded map is the start: features gain dimensions, new ones enter
+  };
+  Mode mode = Mode::Mapping;
+  std::string load;  ///< the map folder (or its map.bin); required by localize and extend
+  /// The robot starts where the map's run ended (its last pose) instead of at
+  /// initial_pose / the source's initial pose.
+  bool start_at_map_end = false;
+};
+
+const char* map_mode_name(MapConfig::Mode mode);
+/// Why a map section cannot run (a mode without a map, a map without a mode
+/// that uses it, …); empty when it can. The YAML reader and the CLI share it.
+std::string map_config_problem(const MapConfig& map);
 
 struct RunConfig {
   std::filesystem::path file;
@@ -163,6 +189,10 @@ struct RunConfig {
   std::int64_t health_check_every = 0;
   std::vector<std::string> plugin_path;
   std::optional<std::int64_t> seed;
+  /// Data steps read and discarded before the first step (a session that
+  /// starts part-way through a log).
+  std::int64_t skip_steps = 0;
+  MapConfig map;
   InstanceConfig source, motion, estimator;
   std::vector<InstanceConfig> features;
   std::vector<SensorConfig> sensors;

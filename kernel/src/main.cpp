@@ -56,7 +56,7 @@ RunConfig load(const std::string& file, PluginRegistry& registry, const std::vec
 }
 
 struct RunCommand {
-  std::string file, out, estimator, resume;
+  std::string file, out, estimator, resume, map, mode;
   std::vector<std::string> sets;  ///< --set KEY=VALUE overrides of the configuration
   long long max_steps = 0;
   std::optional<long long> seed, checkpoint_every;
@@ -83,10 +83,10 @@ int run_and_report(Slam& slam, bool quiet) {
 /// `mspace run --resume DIR`: the configuration is the checkpoint's; only the
 /// output folder, the step limit and the checkpoint interval may change.
 int cmd_resume(const RunCommand& c, const CommonOptions& common) {
-  if (!c.file.empty() || c.seed || !c.estimator.empty() || !c.sets.empty())
+  if (!c.file.empty() || c.seed || !c.estimator.empty() || !c.sets.empty() || !c.map.empty() || !c.mode.empty())
     throw ConfigError(
-        "--resume takes the configuration from the checkpoint: give no CONFIG, --seed, --set or --estimator "
-        "(only --out, --max-steps, --checkpoint-every and --log-level)");
+        "--resume takes the configuration from the checkpoint: give no CONFIG, --seed, --set, --estimator, --map or "
+        "--mode (only --out, --max-steps, --checkpoint-every and --log-level)");
   PluginRegistry registry;
   setup_registry(registry, common);
   std::unique_ptr<Slam> slam = resume_from_checkpoint(c.resume, registry, [&](RunConfig& config) {
@@ -98,6 +98,26 @@ int cmd_resume(const RunCommand& c, const CommonOptions& common) {
   kernel_log().info("resumed ", find_checkpoint_file(c.resume).string(), " (run ", slam->config().name, " of ",
                     slam->config().file.string(), ") at step ", slam->steps_done());
   return run_and_report(*slam, c.quiet);
+}
+
+/// --map DIR and --mode MODE over the YAML's map section (docs/maps.md).
+void apply_map_options(RunConfig& config, const RunCommand& c) {
+  if (!c.map.empty()) {
+    config.map.load = c.map;
+    // A map given on the command line alone is one to localize in.
+    if (c.mode.empty() && config.map.mode == MapConfig::Mode::Mapping) config.map.mode = MapConfig::Mode::Localize;
+  }
+  if (!c.mode.empty()) {
+    bool known = false;
+    for (auto mode : {MapConfig::Mode::Mapping, MapConfig::Mode::Localize, MapConfig::Mode::Extend})
+      if (c.mode == map_mode_name(mode)) {
+        config.map.mode = mode;
+        known = true;
+      }
+    if (!known) throw ConfigError("--mode: '" + c.mode + "' is not one of: mapping, localize, extend");
+  }
+  const std::string problem = map_config_problem(config.map);
+  if (!problem.empty()) throw ConfigError("--map / --mode: " + problem);
 }
 
 int cmd_run(const RunCommand& c, const CommonOptions& common) {
@@ -114,6 +134,7 @@ int cmd_run(const RunCommand& c, const CommonOptions& common) {
   if (c.seed) config.seed = *c.seed;
   if (!c.estimator.empty()) override_estimator(config, c.estimator, registry);
   apply_run_seed(config);
+  apply_map_options(config, c);
   // One line of what runs; the whole resolved configuration at debug level
   // (or with `mspace config`).
   std::string plugins = "source " + config.source.plugin + ", motion " + config.motion.plugin + ", estimator " +
@@ -229,6 +250,10 @@ int main(int argc, char** argv) {
   run->add_option("--set", run_cmd.sets,
                   "KEY=VALUE: override any configuration key, plugin parameters included, e.g. "
                   "features.points.min_observations=5 (repeatable; checked like the file's values)");
+  run->add_option("--map", run_cmd.map,
+                  "a saved map (a run's output folder or its map.bin) to localize in or extend (map.load); alone "
+                  "it means --mode localize");
+  run->add_option("--mode", run_cmd.mode, "mapping, localize or extend (map.mode; docs/maps.md)");
   run->add_flag("--quiet", run_cmd.quiet, "no progress output");
   add_common(run, common);
 

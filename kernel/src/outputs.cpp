@@ -288,6 +288,18 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "data_seconds" << YAML::Value << s.data_seconds;
   y << YAML::Key << "wall_seconds" << YAML::Value << s.wall_seconds;
   y << YAML::Key << "state_dimension" << YAML::Value << s.state_dimension;
+  // The map mode (docs/maps.md): what was loaded, added and changed.
+  y << YAML::Key << "map" << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "mode" << YAML::Value << map_mode_name(slam.map_mode());
+  if (const auto m = slam.map_session_report()) {
+    y << YAML::Key << "loaded_from" << YAML::Value << m->file;
+    y << YAML::Key << "features_loaded" << YAML::Value << m->loaded;
+    if (m->tentative_dropped > 0)
+      y << YAML::Key << "tentative_features_not_used" << YAML::Value << m->tentative_dropped;
+    y << YAML::Key << "features_added" << YAML::Value << m->added;
+    y << YAML::Key << "features_changed" << YAML::Value << m->changed;
+  }
+  y << YAML::EndMap;
   y << YAML::Key << "counts" << YAML::Value << YAML::BeginMap;
   y << YAML::Key << "readings" << YAML::Value << st.readings;
   y << YAML::Key << "measurements" << YAML::Value << st.measurements;
@@ -445,6 +457,9 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   if (s.wall_seconds > 0) os << " (" << std::setprecision(1) << s.data_seconds / s.wall_seconds << "x real time)";
   os << std::setprecision(3) << "\n";
   if (!s.interrupted.empty()) os << "  " << s.interrupted << "\n";
+  if (const auto m = slam.map_session_report())
+    os << "  map mode " << map_mode_name(slam.map_mode()) << " in " << m->file << ": " << m->loaded
+       << " features loaded, " << m->added << " added, " << m->changed << " changed\n";
   os << "  measurements " << st.measurements << ", matched " << st.matched << ", used in updates " << st.updates
      << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned;
   if (st.joined > 0) os << ", shared coordinates " << st.joined;

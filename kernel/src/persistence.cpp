@@ -7,10 +7,12 @@
 #include <array>
 #include <bit>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <numeric>
 #include <set>
 #include <string_view>
 #include <type_traits>
@@ -46,6 +48,11 @@ constexpr std::uint32_t kRun = tag_of("RUN ");
 constexpr std::uint32_t kPsta = tag_of("PSTA");
 // Format version 3: the nonlinear problem of a re-linearising estimator.
 constexpr std::uint32_t kProb = tag_of("PROB");
+// Format version 3: the covariance of a map (docs/maps.md).
+constexpr std::uint32_t kCovm = tag_of("COVM");
+constexpr std::uint32_t kCovj = tag_of("COVJ");
+/// Numbers of the joint covariance per COVJ record: 64 MiB.
+constexpr std::size_t kCovjChunk = std::size_t{8} << 20;
 
 std::string tag_name(std::uint32_t tag) {
   std::string s;
@@ -282,6 +289,89 @@ std::string encode_plugin_state(const StoredPluginState& p) {
   e.i32(p.version);
   encode_state(e, p.state);
   return e.bytes();
+}
+
+/// COVM: the robot's rows at save time, the map's rows, then every estimated
+/// feature's id and marginal covariance, in FEAT order.
+std::string encode_marginals(const StoredMap& map) {
+  Encoder e;
+  e.i32(map.covariance->first_row);
+  e.i32(map.covariance->rows);
+  std::size_t n = 0;
+  for (const StoredFeature& f : map.features) n += f.covariance.size() > 0 ? 1 : 0;
+  e.u64(n);
+  for (const StoredFeature& f : map.features) {
+    if (f.covariance.size() == 0) continue;
+    e.i64(f.id);
+    e.matrix(f.covariance);
+  }
+  return e.bytes();
+}
+
+/// COVJ number `chunk`: the matrix size, where in the packed lower triangle
+/// (column by column) this piece starts, and its numbers.
+std::string encode_joint_chunk(const Eigen::MatrixXd& joint, std::size_t begin, std::size_t count) {
+  Encoder e;
+  const auto n = static_cast<std::size_t>(joint.rows());
+  e.u64(n);
+  e.u64(begin);
+  e.u64(count);
+  // Walk the packed lower triangle from `begin`: column c holds rows c..n−1.
+  std::size_t c = 0, column_start = 0;
+  while (c < n && column_start + (n - c) <= begin) column_start += n - c++;
+  std::size_t r = c + (begin - column_start);
+  for (std::size_t i = 0; i < count; ++i) {
+    e.f64(joint(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)));
+    if (++r == n) r = ++c;
+  }
+  return e.bytes();
+}
+
+void decode_marginals(const std::string& payload, StoredMap& map, std::map<std::int64_t, Eigen::MatrixXd>& out) {
+  Decoder d(payload);
+  StoredCovariance& cov = map.covariance.emplace();
+  cov.first_row = d.i32();
+  cov.rows = d.i32();
+  if (cov.first_row < 1 || cov.first_row > 6 || cov.rows < 0)
+    throw std::runtime_error("bad row counts (robot " + std::to_string(cov.first_row) + ", map " +
+                             std::to_string(cov.rows) + ")");
+  const std::size_t n = d.count(24);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int64_t id = d.i64();
+    Eigen::MatrixXd m = d.matrix();
+    if (m.rows() != m.cols() || !m.allFinite())
+      throw std::runtime_error("the covariance of feature " + std::to_string(id) + " is not a finite square matrix");
+    if (!out.emplace(id, std::move(m)).second)
+      throw std::runtime_error("feature " + std::to_string(id) + " has two covariances");
+  }
+  d.finish();
+}
+
+/// Adds one COVJ piece to `joint` (allocated at the first piece); `filled`
+/// counts the packed numbers read so far, which the piece must continue.
+void decode_joint_chunk(const std::string& payload, StoredMap& map, std::size_t& filled) {
+  Decoder d(payload);
+  if (!map.covariance) throw std::runtime_error("COVJ before COVM");
+  const std::size_t n = d.count(0), begin = d.count(0), count = d.count(8);
+  if (n != static_cast<std::size_t>(map.covariance->first_row + map.covariance->rows))
+    throw std::runtime_error("the joint covariance has " + std::to_string(n) + " rows, the robot and the map " +
+                             std::to_string(map.covariance->first_row + map.covariance->rows));
+  const std::size_t total = n * (n + 1) / 2;
+  if (begin != filled || count == 0 || count > total - filled) throw std::runtime_error("the pieces are out of order");
+  if (!map.covariance->joint) map.covariance->joint = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+  Eigen::MatrixXd& joint = *map.covariance->joint;
+  std::size_t c = 0, column_start = 0;
+  while (c < n && column_start + (n - c) <= begin) column_start += n - c++;
+  std::size_t r = c + (begin - column_start);
+  for (std::size_t i = 0; i < count; ++i) {
+    const double v = d.f64();
+    if (!std::isfinite(v)) throw std::runtime_error("a covariance entry is not finite");
+    joint(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) = v;
+    joint(static_cast<Eigen::Index>(c), static_cast<Eigen::Index>(r)) = v;
+    if (++r == n) r = ++c;
+  }
+  filled += count;
+  d.finish();
 }
 
 void decode_head(const std::string& payload, StoredMap& map) {
@@ -584,6 +674,45 @@ void check_consistency(const std::filesystem::path& file, const StoredMap& map) 
                                f.id, RecordReader::plugin_of(map.types, f.type));
 }
 
+/// The covariance records against the features: every estimated feature has
+/// its marginal, of its dimension, over rows of the map.
+void check_covariance(const std::filesystem::path& file, StoredMap& map,
+                      std::map<std::int64_t, Eigen::MatrixXd>& marginals) {
+  if (!map.covariance) return;
+  const int lo = map.covariance->first_row, hi = lo + map.covariance->rows;
+  for (StoredFeature& f : map.features) {
+    const std::string plugin = RecordReader::plugin_of(map.types, f.type);
+    for (int i : f.state_idx)
+      if (i < lo || i >= hi)
+        throw PersistenceError(file,
+                               "state index " + std::to_string(i) + " is outside the map's rows " +
+                                   std::to_string(lo) + ".." + std::to_string(hi - 1),
+                               f.id, plugin);
+    const auto it = marginals.find(f.id);
+    if (f.state_idx.empty()) {
+      if (it != marginals.end()) throw PersistenceError(file, "a tentative feature has a covariance", f.id, plugin);
+      continue;
+    }
+    if (it == marginals.end()) throw PersistenceError(file, "no covariance (COVM) for the feature", f.id, plugin);
+    const auto dim = static_cast<Eigen::Index>(f.state_idx.size());
+    if (it->second.rows() != dim)
+      throw PersistenceError(file,
+                             "its covariance is " + std::to_string(it->second.rows()) + "x" +
+                                 std::to_string(it->second.cols()) + " for M-space dimension " + std::to_string(dim),
+                             f.id, plugin);
+    f.covariance = std::move(it->second);
+    marginals.erase(it);
+  }
+  if (!marginals.empty())
+    throw PersistenceError(file, "a covariance (COVM) for feature " + std::to_string(marginals.begin()->first) +
+                                     ", which is not in the file");
+  for (const StoredShared& c : map.shared)
+    for (int i : c.state_idx)
+      if (i < lo || i >= hi)
+        throw PersistenceError(file, "shared coordinate " + std::to_string(c.id) + ": state index " +
+                                         std::to_string(i) + " is outside the map's rows");
+}
+
 std::string what_with_context(const std::filesystem::path& file, const std::string& what,
                               std::optional<std::int64_t> feature_id, const std::string& plugin) {
   std::string s = "map file '" + file.string() + "'";
@@ -642,7 +771,7 @@ const std::string& StoredState::get_bytes(const std::string& name) const {
   return it->second;
 }
 
-StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file) {
+StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file, SnapshotCovariance covariance) {
   StoredMap map;
   map.abi_tag = sdk_abi_tag();
   map.run = slam.config().name;
@@ -663,6 +792,19 @@ StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file) {
   }
   for (const SharedCoordinate& c : slam.shared_coordinates())
     map.shared.push_back({c.id, c.kind, c.state_idx, c.members});
+  if (covariance == SnapshotCovariance::None) return map;
+  // The map's covariance: every estimated feature's marginal, and (for
+  // `extend`) the joint covariance of all the map's estimator rows.
+  StoredCovariance& cov = map.covariance.emplace();
+  cov.first_row = static_cast<int>(slam.robot_dofs().size());
+  cov.rows = slam.estimator_dim() - cov.first_row;
+  for (std::size_t i = 0; i < map.features.size(); ++i)
+    if (!map.features[i].state_idx.empty()) map.features[i].covariance = slam.feature_covariance(slam.features()[i]);
+  if (covariance == SnapshotCovariance::Joint) {
+    std::vector<int> rows(static_cast<std::size_t>(cov.first_row + cov.rows));
+    std::iota(rows.begin(), rows.end(), 0);
+    cov.joint = slam.state_covariance(rows);
+  }
   return map;
 }
 
@@ -686,6 +828,16 @@ void write_map_file(const std::filesystem::path& file, const StoredMap& map) {
     for (std::size_t i = 0; i < map.checkpoint->plugins.size(); ++i)
       w.write(kPsta, static_cast<std::int64_t>(i), -1, encode_plugin_state(map.checkpoint->plugins[i]));
     if (map.checkpoint->problem) w.write(kProb, 0, -1, encode_state_payload(*map.checkpoint->problem));
+  }
+  if (map.covariance) {
+    w.write(kCovm, 0, -1, encode_marginals(map));
+    if (map.covariance->joint) {
+      const auto n = static_cast<std::size_t>(map.covariance->joint->rows());
+      const std::size_t total = n * (n + 1) / 2;
+      for (std::size_t begin = 0, chunk = 0; begin < total; begin += kCovjChunk, ++chunk)
+        w.write(kCovj, static_cast<std::int64_t>(chunk), -1,
+                encode_joint_chunk(*map.covariance->joint, begin, std::min(kCovjChunk, total - begin)));
+    }
   }
   Encoder end;
   end.put(w.records());
@@ -714,6 +866,8 @@ StoredMap read_map_file(const std::filesystem::path& file, const std::string& ki
                                      std::to_string(kMapFormatVersion));
   RecordReader reader(file, in, static_cast<std::uint64_t>(size));
   bool head = false, types = false, parameters = false, run = false;
+  std::map<std::int64_t, Eigen::MatrixXd> marginals;  // COVM, by feature id
+  std::size_t joint_filled = 0;                        // COVJ numbers read
   for (;;) {
     const std::uint64_t index = reader.index();
     Record r = reader.next(map.types);
@@ -771,6 +925,12 @@ StoredMap read_map_file(const std::filesystem::path& file, const std::string& ki
         if (!map.checkpoint) throw std::runtime_error("a nonlinear problem in a map");
         if (map.checkpoint->problem) throw std::runtime_error("a second PROB record");
         map.checkpoint->problem = decode_state_payload(r.payload);
+      } else if (r.tag == kCovm && map.format_version >= 3) {
+        if (map.kind != "map") throw std::runtime_error("a map covariance record in a " + map.kind);
+        if (map.covariance) throw std::runtime_error("a second COVM record");
+        decode_marginals(r.payload, map, marginals);
+      } else if (r.tag == kCovj && map.format_version >= 3) {
+        decode_joint_chunk(r.payload, map, joint_filled);
       } else if (r.tag == kEnd) {
         std::uint64_t count = 0;
         {
@@ -797,7 +957,14 @@ StoredMap read_map_file(const std::filesystem::path& file, const std::string& ki
   }
   if (map.checkpoint && (!parameters || !run))
     throw PersistenceError(file, std::string("a checkpoint without its ") + (parameters ? "RUN" : "PARM") + " record");
+  if (map.covariance && map.covariance->joint) {
+    const auto n = static_cast<std::size_t>(map.covariance->first_row + map.covariance->rows);
+    if (joint_filled != n * (n + 1) / 2)
+      throw PersistenceError(file, "truncated joint covariance: " + std::to_string(joint_filled) + " of " +
+                                       std::to_string(n * (n + 1) / 2) + " numbers (COVJ records missing)");
+  }
   check_consistency(file, map);
+  check_covariance(file, map, marginals);
   return map;
 }
 
@@ -839,7 +1006,20 @@ std::vector<RestoredFeature> restore_features(const StoredMap& map, const std::f
 }
 
 void write_map_bin(const std::filesystem::path& file, const Slam& slam) {
-  write_map_file(file, snapshot_map(slam, file));
+  write_map_file(file, snapshot_map(slam, file,
+                                    slam.config().output.map_joint_covariance ? SnapshotCovariance::Joint
+                                                                             : SnapshotCovariance::Marginal));
+}
+
+std::filesystem::path find_map_file(const std::filesystem::path& given) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::is_regular_file(given, ec)) return given;
+  if (fs::is_directory(given, ec)) {
+    if (fs::is_regular_file(given / "map.bin", ec)) return given / "map.bin";
+    throw PersistenceError(given, "no map here: the folder holds no map.bin (written by a mapping run with output.map: true)");
+  }
+  throw PersistenceError(given, "no such file or folder");
 }
 
 }  // namespace mspace::kernel

@@ -26,6 +26,12 @@
 // Version 1 maps and version 2 files are still read (they have no PROB: a
 // re-linearising run cannot resume from one, and says so).
 //
+// Format version 3 also adds the covariance of a map (issue 16, docs/maps.md):
+// COVM (every estimated feature's marginal covariance over its own rows: what
+// `localize` needs) and COVJ (the joint covariance of all the estimator's
+// rows, the robot's and the map's, lower triangle packed by columns, in
+// records of at most 64 MiB: what `extend` needs to go on exactly). Versions 1 and 2 are still read.
+//
 // Every feature goes through its plugin: Feature::save() on the way out,
 // FeatureType::restore() on the way in. Reading checks the whole file before
 // anything is restored, and restore_features() returns all features or none.
@@ -54,7 +60,7 @@ namespace mspace::kernel {
 class Slam;
 struct FeatureTypeSlot;
 
-/// The container format this build writes; it reads this one and versions 1 and 2.
+/// The container format this build writes; it reads this one and the older ones down to kOldestMapFormatVersion.
 inline constexpr std::uint32_t kMapFormatVersion = 3;
 /// The oldest container format this build reads (a map without checkpoint records).
 inline constexpr std::uint32_t kOldestMapFormatVersion = 1;
@@ -87,6 +93,9 @@ struct StoredFeature : FeatureBookkeeping {
   std::int64_t id = 0;
   int type = 0;  ///< index into StoredMap::types
   SavedFeature saved;
+  /// Covariance of its M-space perturbations (dim × dim, over state_idx; from
+  /// COVM, format 3); empty for a tentative feature or an older file.
+  Eigen::MatrixXd covariance;
 };
 
 /// A shared coordinate (T-RO §VI) as in SharedCoordinate.
@@ -134,6 +143,19 @@ struct StoredCheckpoint {
   std::optional<StoredState> problem;
 };
 
+/// The covariance of a map's estimator rows (format version 3): the rows are
+/// numbered as the writing run's estimator had them, the robot's first
+/// (0 .. first_row − 1), then the map's (first_row .. first_row + rows − 1).
+struct StoredCovariance {
+  int first_row = 0;  ///< estimator rows of the robot when the map was saved
+  int rows = 0;       ///< estimator rows of the map
+  /// The joint covariance of the robot's and the map's rows ((first_row +
+  /// rows)², COVJ): the map's block is what `extend` needs; with the robot's
+  /// rows a session that starts where the map's run ended goes on exactly.
+  /// Absent when the map was saved with output.map_covariance: marginal.
+  std::optional<Eigen::MatrixXd> joint;
+};
+
 /// Everything a map file holds (format version 3; a checkpoint when `checkpoint` is set).
 struct StoredMap {
   std::uint32_t format_version = kMapFormatVersion;
@@ -145,6 +167,8 @@ struct StoredMap {
   std::vector<StoredFeature> features;
   std::vector<StoredShared> shared;
   std::optional<StoredCheckpoint> checkpoint;  ///< set exactly when kind == "checkpoint"
+  /// Maps of format 3: the marginals are in the features, the rest here.
+  std::optional<StoredCovariance> covariance;
 };
 
 /// A list of strings as one byte string (each as a u64 length and its bytes),
@@ -153,10 +177,15 @@ struct StoredMap {
 std::string pack_strings(const std::vector<std::string>& strings);
 std::vector<std::string> unpack_strings(const std::string& bytes);
 
-/// The map of a run, every feature through its plugin's save(). A plugin
-/// that throws is reported with the feature id and the plugin (as a
-/// PersistenceError naming `file`, the file it is meant for).
-StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file);
+/// What snapshot_map takes of the estimator's covariance.
+enum class SnapshotCovariance { None, Marginal, Joint };
+
+/// The map of a run, every feature through its plugin's save(), with the
+/// covariance `covariance` asks for. A plugin that throws is reported with the
+/// feature id and the plugin (as a PersistenceError naming `file`, the file
+/// it is meant for).
+StoredMap snapshot_map(const Slam& slam, const std::filesystem::path& file,
+                       SnapshotCovariance covariance = SnapshotCovariance::None);
 
 /// Writes `map` to `file` atomically: into a temporary file beside it, flushed
 /// to disk, then renamed over `file`; on any error `file` is untouched.
@@ -183,7 +212,12 @@ struct RestoredFeature {
 std::vector<RestoredFeature> restore_features(const StoredMap& map, const std::filesystem::path& file,
                                               const std::vector<FeatureTypeSlot>& types);
 
-/// snapshot_map + write_map_file: the run's `map.bin`.
+/// snapshot_map + write_map_file: the run's `map.bin`, with the covariance
+/// output.map_covariance asks for.
 void write_map_bin(const std::filesystem::path& file, const Slam& slam);
+
+/// The map file `given` names: a map.bin itself or a folder holding one.
+/// PersistenceError when there is none.
+std::filesystem::path find_map_file(const std::filesystem::path& given);
 
 }  // namespace mspace::kernel

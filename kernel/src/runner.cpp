@@ -35,8 +35,13 @@ std::vector<std::string> write_outputs(const Slam& slam, const RunSummary& summa
     for (const fs::path& f : write_pose_files(dir, slam)) written.push_back(f.filename().string());
   if (out.map) {
     write_atomically(dir / "map.yaml", [&](const fs::path& f) { write_map_yaml(f, slam); });
-    write_map_bin(dir / "map.bin", slam);  // the exact store, through the plugins' save(); atomic itself
-    written.insert(written.end(), {"map.yaml", "map.bin"});
+    written.emplace_back("map.yaml");
+    // The exact store, through the plugins' save(); atomic itself. A localize
+    // run changes no map: the map.bin it read stays the map.
+    if (slam.map_mode() != MapConfig::Mode::Localize) {
+      write_map_bin(dir / "map.bin", slam);
+      written.emplace_back("map.bin");
+    }
   }
   if (out.summary) {
     write_atomically(dir / "summary.yaml", [&](const fs::path& f) { write_summary_yaml(f, summary, slam); });

@@ -140,13 +140,8 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
 
   x_r_ = guarded(config_.source.instance, *source_lib_, "initial_pose", [&] { return source_->initial_pose(); });
   if (!config_.initial_pose.isZero()) x_r_ = config_.initial_pose;
-  const int k = static_cast<int>(dofs_.size());
-  Eigen::MatrixXd P0 = Eigen::MatrixXd::Zero(k, k);
-  for (int i = 0; i < k; ++i) P0(i, i) = config_.initial_sigma[dofs_[i]] * config_.initial_sigma[dofs_[i]];
-  guarded(config_.estimator.instance, *estimator_lib_, "reset", [&] { estimator_->reset(P0); });
-  const Eigen::MatrixXd U_r = planar_global_motion(x_r_, dofs_);
-  guarded(config_.estimator.instance, *estimator_lib_, "set_unobservable",
-          [&] { estimator_->set_unobservable(U_r); });
+  const Eigen::MatrixXd P0 = initial_covariance();
+  reset_estimator(P0);
 
   if (guarded(config_.estimator.instance, *estimator_lib_, "wants_problem",
               [&] { return estimator_->wants_problem(); })) {
@@ -157,12 +152,31 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     problem_->start(P0);
   }
   if (config_.checkpoint_every > 0) require_checkpointable();  // say so now, not at the first checkpoint
+  if (config_.checkpoint_every > 0 && (config_.map.mode != MapConfig::Mode::Mapping || config_.skip_steps > 0))
+    throw ConfigError(config_.file.string() + ": run.checkpoint_every: checkpoints of a run that loads a map or skips "
+                      "data steps are not supported yet (a resumed run would not know the map or the skipped steps)");
+  if (config_.map.mode != MapConfig::Mode::Mapping) load_map();
+  skip_data_steps();
 }
 
 Slam::~Slam() {
   // Features were created by plugins: drop them before the types and libraries.
   problem_.reset();
   features_.clear();
+}
+
+Eigen::MatrixXd Slam::initial_covariance() const {
+  const int k = static_cast<int>(dofs_.size());
+  Eigen::MatrixXd P0 = Eigen::MatrixXd::Zero(k, k);
+  for (int i = 0; i < k; ++i) P0(i, i) = config_.initial_sigma[dofs_[i]] * config_.initial_sigma[dofs_[i]];
+  return P0;
+}
+
+void Slam::reset_estimator(const Eigen::MatrixXd& P0) {
+  guarded(config_.estimator.instance, *estimator_lib_, "reset", [&] { estimator_->reset(P0); });
+  const Eigen::MatrixXd U_r = planar_global_motion(x_r_, dofs_);
+  guarded(config_.estimator.instance, *estimator_lib_, "set_unobservable",
+          [&] { estimator_->set_unobservable(U_r); });
 }
 
 std::size_t Slam::size_hint() const {
@@ -182,10 +196,8 @@ Eigen::MatrixXd Slam::robot_covariance() const { return estimator_->marginal(rob
 
 Eigen::MatrixXd Slam::feature_covariance(const MapFeature& f) const {
   if (f.state_idx.empty()) return {};
-  return estimator_->marginal(f.state_idx);
+  return state_covariance(f.state_idx);
 }
-
-Eigen::MatrixXd Slam::state_covariance(const std::vector<int>& idx) const { return estimator_->marginal(idx); }
 
 Eigen::VectorXd Slam::shared_value(const SharedCoordinate& c) const {
   const auto [feature_id, block] = c.members.front();
@@ -224,16 +236,19 @@ bool Slam::step() {
   std::vector<int> touched;
   for (const ReadingWork& w : work)
     for (const Match& m : w.matches) touched.push_back(m.feature);
-  for (std::size_t i = 0; i < features_.size(); ++i)
-    if (features_[i].created_step == step_) touched.push_back(static_cast<int>(i));
+  if (!localizing())  // (localize creates nothing; this scan would cost O(map size) per step)
+    for (std::size_t i = 0; i < features_.size(); ++i)
+      if (features_[i].created_step == step_) touched.push_back(static_cast<int>(i));
   std::sort(touched.begin(), touched.end());
   touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
-  extend(touched);
-  if (config_.association.join_distance > 0.0) join_shared_coordinates(touched);
-  prune_tentative();
+  if (!localizing()) {  // a map being localized in is read-only: phases 3 and 4 leave it alone
+    extend(touched);
+    if (config_.association.join_distance > 0.0) join_shared_coordinates(touched);
+    prune_tentative();
+  }
   stats_.seconds_extend += seconds_since(t0);
-  if (!work.empty()) associator_.map_changed();  // features were created, extended, joined
-  if (config_.association.loop_closing && !work.empty()) {
+  if (!work.empty() && !localizing()) associator_.map_changed();  // features were created, extended, joined
+  if (config_.association.loop_closing && !work.empty() && !localizing()) {
     t0 = Clock::now();
     close_loops(data);
     stats_.seconds_loops += seconds_since(t0);
@@ -372,7 +387,7 @@ void Slam::process_sensor_reading(const SensorReading& reading, int sensor_index
                            m.candidate.C_eta, m.candidate.J_state);
   update(w.matches);
   stats_.seconds_update += seconds_since(t0);
-  if (!w.matches.empty()) associator_.map_changed();  // the update moved features
+  if (!w.matches.empty() && !localizing()) associator_.map_changed();  // the update moved features
   work.push_back(std::move(w));
 }
 
@@ -383,7 +398,8 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
                      ReadingWork& work) {
   Mat6 J_sr;
   const Pose6 x_ms = compound(x_r_, sensor.config.mount, &J_sr);  // eq. 17
-  const AssociationView map{features_, types_, *estimator_, robot_idx_, step_};
+  const AssociationView map{features_, types_, [this](const std::vector<int>& rows) { return state_covariance(rows); },
+                            robot_idx_, step_};
   AssociationResult result = associator_.associate(map, sensor, x_ms, columns(J_sr, dofs_), meas);
   for (Candidate& c : result.matches) {
     Match match;
@@ -410,7 +426,7 @@ void Slam::record_health(int sensor_index, const ReadingWork& w, double extract_
     idx.insert(idx.end(), f.state_idx.begin(), f.state_idx.end());
     const Candidate& c = match.candidate;
     health.record_update({w.measurements[match.measurement].kind, c.innovation.eta, c.J_state,
-                          checked_marginal(idx), c.C_eta, static_cast<int>(robot_idx_.size()),
+                          state_covariance(idx), c.C_eta, static_cast<int>(robot_idx_.size()),
                           robot_truth_ ? robot_error(*robot_truth_, x_r_, dofs_) : Eigen::VectorXd()});
   }
   for (const std::string& warning : health.take_new_warnings()) log_->warn("step ", step_, ": ", warning);
@@ -437,6 +453,7 @@ void Slam::update(std::vector<Match>& matches) {
     o.idx = robot_idx_;
     o.idx.insert(o.idx.end(), mf.state_idx.begin(), mf.state_idx.end());
     o.J = c.J_state;
+    if (localizing()) consider_map_uncertainty(mf, o);
     obs.push_back(std::move(o));
   }
   if (obs.empty()) return;
@@ -499,6 +516,7 @@ void Slam::apply_correction(const Eigen::VectorXd& dx) {
   for (std::size_t i = 0; i < dofs_.size(); ++i) x_r_[dofs_[i]] += dx[static_cast<Eigen::Index>(i)];
   for (int a = kTheta; a <= kPsi; ++a) x_r_[a] = wrap_angle(x_r_[a]);
   if (problem_) problem_->moved(dx);
+  if (localizing()) return;  // dx holds the robot only: the map is read-only
   // One δx_p vector per M-space dimension, reused from feature to feature:
   // this loop visits every feature in the estimator after every update.
   std::vector<Eigen::VectorXd> by_dim;
@@ -517,6 +535,7 @@ void Slam::apply_correction(const Eigen::VectorXd& dx) {
 // ---- Phase 3: add dense information ----------------------------------------
 
 void Slam::add_dense_information(std::vector<ReadingWork>& work) {
+  if (localizing()) return;  // the map is read-only: no evidence added, no features created
   int anchors = 0;  // matches with features of the old map (loop closing's window)
   for (ReadingWork& w : work) {
     const SensorView view = sensor_view(w.sensor, w.t);  // after the update

@@ -19,6 +19,8 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -145,8 +147,24 @@ class Slam {
   /// nothing half-loaded survives.
   void restore_checkpoint(const StoredMap& checkpoint, const std::filesystem::path& file);
 
+  // ---- Saved maps (map_session.cpp, docs/maps.md) ---------------------------
+  /// The map mode of the run (map.mode).
+  MapConfig::Mode map_mode() const { return config_.map.mode; }
+  /// What a run that loaded a map reports: features loaded, added and changed.
+  struct MapSessionReport {
+    std::string file;  ///< the map.bin loaded
+    int loaded = 0;    ///< features taken from the file
+    int tentative_dropped = 0;  ///< localize: tentative features of the file, not used
+    int added = 0;     ///< features created in this run
+    int changed = 0;   ///< loaded features whose coordinates or M-space dimension differ now
+  };
+  /// Empty unless the run loaded a map; `changed` is counted now.
+  std::optional<MapSessionReport> map_session_report() const;
+
   const RunConfig& config() const { return config_; }
   const Pose6& pose() const { return x_r_; }
+  /// Rows of the estimator's state (robot and map).
+  int estimator_dim() const { return estimator_->dim(); }
   /// Covariance of the robot's estimated pose coordinates.
   Eigen::MatrixXd robot_covariance() const;
   const std::vector<int>& robot_dofs() const { return dofs_; }
@@ -160,7 +178,9 @@ class Slam {
   const std::vector<FeatureTypeSlot>& feature_types() const { return types_; }
   /// Covariance of a feature's M-space perturbations (dim × dim).
   Eigen::MatrixXd feature_covariance(const MapFeature& f) const;
-  /// Covariance of the given estimator rows.
+  /// Covariance of the given state rows: the estimator's; in localize mode
+  /// the robot's rows from the estimator and the map's from the loaded map
+  /// (uncorrelated with the robot, map_session.cpp).
   Eigen::MatrixXd state_covariance(const std::vector<int>& idx) const;
   /// Current value of a shared coordinate (from its first member).
   Eigen::VectorXd shared_value(const SharedCoordinate& c) const;
@@ -223,6 +243,23 @@ class Slam {
   /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
   bool relinearize(bool end_of_data);
   SensorView sensor_view(int sensor_index, double t) const;
+  /// The features of a map file rebuilt through their plugins, with the
+  /// kernel's bookkeeping (all or nothing; checkpoint.cpp and map_session.cpp).
+  std::vector<MapFeature> restored_features(const StoredMap& map, const std::filesystem::path& file) const;
+  /// Loads config_.map.load for localize / extend (map_session.cpp): the
+  /// constructor's last act, so a Slam is never half-loaded.
+  void load_map();
+  /// The robot's covariance at the start: initial_pose.sigma² on the diagonal.
+  Eigen::MatrixXd initial_covariance() const;
+  /// Resets the estimator to the robot alone at x_r_ with covariance P0 (and
+  /// its unobservable directions there).
+  void reset_estimator(const Eigen::MatrixXd& P0);
+  /// Discards config_.skip_steps data steps.
+  void skip_data_steps();
+  bool localizing() const { return config_.map.mode == MapConfig::Mode::Localize; }
+  /// Localize mode: the measurement noise of a match grown by the map's
+  /// uncertainty, C_eta + J_f P_ff J_fᵀ, and the robot's columns only.
+  void consider_map_uncertainty(const MapFeature& mf, LinearizedObservation& o) const;
 
   RunConfig config_;
   std::shared_ptr<Logger> log_;
@@ -267,6 +304,14 @@ class Slam {
   /// old map grew.
   double last_anchor_path_ = 0.0;
   StepObserver step_observer_;
+
+  // Saved maps (map_session.cpp).
+  std::optional<MapSessionReport> map_session_;
+  /// Loaded features' coordinates and dimensions, by id, to count changes.
+  std::unordered_map<int, std::pair<Eigen::VectorXd, int>> loaded_state_;
+  /// Localize: the loaded map's covariance entries, keyed by (row, column)
+  /// of the map's rows (each feature's marginal block; zero elsewhere).
+  std::unordered_map<std::int64_t, double> map_prior_;
 };
 
 }  // namespace mspace::kernel

@@ -25,6 +25,10 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 std::vector<ParamSpec> world_params() {
   return {
       param_int("seed", 1, "random seed: identical seeds give bit-identical worlds and data", 0),
+      param_int("world_seed", -1,
+                "seed of the landmark layout alone (-1: `seed`), so that runs with other noise (`seed`, --seed) "
+                "see the same world",
+                -1),
       param_double("world_width", 60.0, "extent of the world along x, centred on the origin (m)",
                    1.0),
       param_double("world_height", 40.0, "extent of the world along y, centred on the origin (m)",
@@ -92,7 +96,7 @@ bool far_from_landmarks(const Eigen::Vector2d& p, const std::vector<Eigen::Vecto
 /// Uniform random landmarks (rejection sampling), at least `spacing` apart and
 /// `clearance` from the path. Returns 3 × N with z = 0.
 Eigen::MatrixXd place_landmarks(const SimConfig& c, const std::vector<Pose6>& path) {
-  SimRandom rng(c.seed, kLandmarkStream);
+  SimRandom rng(c.world_seed < 0 ? c.seed : static_cast<std::uint64_t>(c.world_seed), kLandmarkStream);
   const auto wanted = static_cast<std::size_t>(c.num_landmarks);
   const std::size_t max_attempts = 200 * wanted + 1000;
   std::vector<Eigen::Vector2d> placed;
@@ -147,6 +151,7 @@ std::vector<ParamSpec> param_specs() {
 SimConfig SimConfig::from_params(const Params& p) {
   SimConfig c;
   c.seed = static_cast<std::uint64_t>(p.get_int("seed"));
+  c.world_seed = p.get_int("world_seed");
   c.world_width = p.get_double("world_width");
   c.world_height = p.get_double("world_height");
   c.num_landmarks = static_cast<int>(p.get_int("num_landmarks"));

@@ -41,6 +41,7 @@ namespace mspace::sim_world {
 /// defaults() for the default values (which come from param_specs()).
 struct SimConfig {
   std::uint64_t seed = 0;
+  std::int64_t world_seed = -1;  ///< the landmark layout's seed; −1: `seed`
   // world and landmarks
   double world_width = 0.0;
   double world_height = 0.0;

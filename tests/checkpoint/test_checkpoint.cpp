@@ -29,6 +29,7 @@
 #include "config.hpp"
 #include "logging.hpp"
 #include "persistence.hpp"
+#include "test_paths.hpp"
 #include "plugin_registry.hpp"
 #include "runner.hpp"
 #include "slam.hpp"
@@ -42,20 +43,9 @@ namespace fs = std::filesystem;
 /// The brief's tolerance for "equal": every number of every output within 1e-9.
 constexpr double kTolerance = 1e-9;
 
-fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "test-output" / "checkpoint" /
-                       ::testing::UnitTest::GetInstance()->current_test_info()->name() / name;
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
-fs::path datasets() {
-  const char* env = std::getenv("MSPACE_DATA");
-  return env != nullptr && *env != '\0' ? fs::path(env) : fs::path(MSPACE_SOURCE_DIR).parent_path() / "shared" / "datasets";
-}
-
-fs::path config_file(const std::string& name) { return fs::path(MSPACE_SOURCE_DIR) / "config" / name; }
+fs::path scratch(const std::string& name) { return test::scratch_dir("checkpoint", name); }
+using test::config_file;
+using test::datasets;
 
 std::string read_text(const fs::path& file) {
   std::ifstream in(file, std::ios::binary);

@@ -141,18 +141,18 @@ TEST(Config, EmptyOrNonMapDocumentIsAnError) {
   EXPECT_EQ(config_error(""), "test.yaml:1:1: the configuration is empty");
   EXPECT_EQ(config_error("- a\n- b\n"),
             "test.yaml:1:1: the configuration must be a map of sections (run, source, motion, estimator, "
-            "features, sensors, association, initial_pose, output, evaluation)");
+            "features, sensors, association, initial_pose, output, evaluation, map)");
 }
 
 TEST(Config, UnknownKeysListTheAllowedOnes) {
   EXPECT_EQ(config_error(kBase + "outputs:\n  dir: x\n"),
             "test.yaml:21:1: outputs: unknown key (allowed: run, source, motion, estimator, features, sensors, "
-            "association, initial_pose, output, evaluation)");
+            "association, initial_pose, output, evaluation, map)");
   EXPECT_EQ(config_error(edited("    mount:", "    mounts:")),
             "test.yaml:16:5: sensors.laser.mounts: unknown key (allowed: channel, mount, extractor, feeds, max_range, silent_readings)");
   EXPECT_EQ(config_error(edited("  name: t1\n", "  name: t1\n  speed: 3\n")),
             "test.yaml:3:3: run.speed: unknown key (allowed: name, log_level, max_steps, checkpoint_every, "
-            "health_check_every, plugin_path, seed)");
+            "health_check_every, plugin_path, seed, skip_steps)");
 }
 
 TEST(Config, DuplicateKeyIsAnError) {

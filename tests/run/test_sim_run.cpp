@@ -233,7 +233,7 @@ TEST_F(SimRun, InterruptionWritesTheOutputsOfTheStepsProcessed) {
 }
 
 // The same through the command line: `mspace run` on a long simulated run,
-// SIGTERM after a second, exits with 143 and writes the outputs.
+// SIGTERM once it is running, exits with 143 and writes the outputs.
 TEST_F(SimRun, TheCommandLineExitsWith143OnSigtermAndWritesTheOutputs) {
   const std::filesystem::path long_config = out_.parent_path() / "long_sim.yaml";
   std::filesystem::create_directories(out_);

@@ -1,0 +1,237 @@
+// map_session.cpp — a run that starts from a saved map (issue 16, docs/maps.md).
+//
+// The modes are modes of the one four-phase loop (slam.cpp), not a second loop:
+//
+//   mapping   the map starts empty (no file is read);
+//   localize  the map of map.bin is read-only: association matches against it,
+//             the update corrects the robot only, phases 3 and 4 leave the map
+//             alone, nothing is created;
+//   extend    the map of map.bin is the start of this run's map: its features
+//             and shared coordinates enter the estimator with the map's joint
+//             covariance and the run maps on (features gain dimensions, new
+//             ones enter); the map it writes is one map of both sessions.
+//
+// How localize accounts for the map's uncertainty. The estimator holds the
+// robot's rows only. A feature's own error δx_p (covariance P_ff, its marginal
+// as saved in COVM) enters every observation of it as extra measurement noise:
+// with η ≈ J_r δx_r + J_f δx_p + noise (eq. 30), the update uses
+//     C_η' = C_η + J_f P_ff J_fᵀ
+// and J_r alone — the map's marginal covariances as priors, "considered" but
+// never updated (Schmidt's consider filter without the robot–map cross terms).
+// What this leaves out: the correlation between the robot's error and a
+// feature's after the feature has been used, so a long stay among the same few
+// features makes the robot's covariance optimistic by up to the map's
+// uncertainty. Association gates with the same covariance (robot from the
+// estimator, feature from the map, no cross term). Every step costs what the
+// features in view cost: the spatial index finds them, and no step touches
+// the rest of the map.
+#include <algorithm>
+#include <cstdint>
+#include <numeric>
+
+#include <Eigen/Cholesky>
+
+#include "persistence.hpp"
+#include "problem.hpp"
+#include "slam.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+std::int64_t entry_key(int row, int col) {
+  return (static_cast<std::int64_t>(row) << 32) | static_cast<std::uint32_t>(col);
+}
+
+}  // namespace
+
+std::vector<MapFeature> Slam::restored_features(const StoredMap& map, const std::filesystem::path& file) const {
+  std::vector<RestoredFeature> restored = restore_features(map, file, types_);
+  std::vector<MapFeature> features;
+  features.reserve(restored.size());
+  for (std::size_t i = 0; i < restored.size(); ++i) {
+    const StoredFeature& sf = map.features[i];
+    MapFeature mf;
+    mf.id = static_cast<int>(sf.id);
+    mf.type = restored[i].type;
+    mf.feature = std::move(restored[i].feature);
+    static_cast<FeatureBookkeeping&>(mf) = sf;
+    if (mf.last_sensor < 0 || mf.last_sensor >= static_cast<int>(sensors_.size()))
+      throw PersistenceError(file, "its last sensor " + std::to_string(mf.last_sensor) + " is not in the run", sf.id,
+                             types_[static_cast<std::size_t>(mf.type)].plugin);
+    features.push_back(std::move(mf));
+  }
+  return features;
+}
+
+void Slam::load_map() {
+  const std::filesystem::path file = find_map_file(config_.map.load);
+  const StoredMap map = read_map_file(file, "map");  // the whole file, checked
+  const char* mode = map_mode_name(config_.map.mode);
+  const auto fail = [&](const std::string& what) { return PersistenceError(file, what); };
+  if (problem_)
+    throw fail(std::string("map.mode ") + mode + ": estimator '" + config_.estimator.plugin +
+               "' re-linearises (it records a nonlinear problem, for which a loaded map has no factors); the map "
+               "modes need an estimator that does not (`mspace plugins` lists the estimators)");
+  if (!map.covariance)
+    throw fail("the map holds no covariance (format version " + std::to_string(map.format_version) +
+               "; maps hold it from version 3): re-create it with this build of mspace");
+  const StoredCovariance& cov = *map.covariance;
+  const bool localize = localizing();
+  if (!localize && !cov.joint)
+    throw fail(std::string("map.mode ") + mode +
+               " needs the joint covariance of the map, and this map holds only each feature's marginal (it was "
+               "saved with output.map_covariance: marginal): re-create it with output.map_covariance: joint");
+
+  // 1. The features through their plugins, all or nothing; the map's rows
+  //    renumbered after this run's robot rows.
+  std::vector<MapFeature> features = restored_features(map, file);
+  const int k = static_cast<int>(dofs_.size());
+  const auto renumber = [&](std::vector<int>& idx) {
+    for (int& i : idx) i = i - cov.first_row + k;
+  };
+  std::vector<SharedCoordinate> shared;
+  for (const StoredShared& s : map.shared) {
+    shared.push_back({s.id, s.kind, s.state_idx, s.members});
+    renumber(shared.back().state_idx);
+  }
+  MapSessionReport report;
+  report.file = file.string();
+  std::vector<MapFeature> kept;
+  for (std::size_t i = 0; i < features.size(); ++i) {
+    MapFeature& mf = features[i];
+    renumber(mf.state_idx);
+    renumber(mf.own_idx);
+    // This session's history starts now (steps and path distance are the run's).
+    mf.created_step = mf.last_seen_step = 0;
+    mf.created_path = mf.last_seen_path = 0.0;
+    next_feature_id_ = std::max(next_feature_id_, mf.id + 1);
+    if (localize) {
+      // Tentative features are evidence for mapping, not part of the map.
+      if (mf.feature->mspace_dim() == 0) {
+        ++report.tentative_dropped;
+        continue;
+      }
+      const Eigen::MatrixXd& P = map.features[i].covariance;
+      for (std::size_t a = 0; a < mf.state_idx.size(); ++a)
+        for (std::size_t b = 0; b < mf.state_idx.size(); ++b)
+          map_prior_[entry_key(mf.state_idx[a], mf.state_idx[b])] =
+              P(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
+    }
+    loaded_state_[mf.id] = {mf.feature->coords(), mf.feature->mspace_dim()};
+    kept.push_back(std::move(mf));
+  }
+  for (const SharedCoordinate& c : shared) next_shared_id_ = std::max(next_shared_id_, c.id + 1);
+  report.loaded = static_cast<int>(kept.size());
+
+  // 2. The robot, and 3. (extend) the map's rows in the estimator, in one
+  //    augmentation δx_map = J δx_r + w, w ~ N(0, C):
+  //    - start: config — the robot where the configuration (or the source)
+  //      puts it, with initial_pose.sigma, uncorrelated with the map: J = 0,
+  //      C = P_mm, the map's block of the saved joint covariance;
+  //    - start: map_end — the robot where the map's run ended, with its saved
+  //      covariance P_rr and its correlation with the map: J = P_mr P_rr⁻¹,
+  //      C = P_mm − P_mr P_rr⁻¹ P_rm (the map given the robot), so that the
+  //      estimator holds the saved joint covariance and the session goes on
+  //      as the saved run would have.
+  const bool from_end = config_.map.start_at_map_end;
+  if (from_end) x_r_ = map.robot_pose;
+  if (localize || !from_end) {
+    reset_estimator(initial_covariance());
+  } else if (cov.first_row != k) {
+    throw fail("start: map_end needs the robot coordinates the map's run estimated (" +
+               std::to_string(cov.first_row) + " rows; this run's motion model estimates " + std::to_string(k) + ")");
+  } else {
+    reset_estimator(cov.joint->topLeftCorner(k, k));
+  }
+  if (!localize && cov.rows > 0) {
+    const Eigen::MatrixXd& P = *cov.joint;
+    const Eigen::MatrixXd P_mm = P.bottomRightCorner(cov.rows, cov.rows);
+    StateAugmentation aug;
+    if (from_end) {
+      const Eigen::LDLT<Eigen::MatrixXd> P_rr(P.topLeftCorner(k, k));
+      if (P_rr.info() != Eigen::Success || !(P_rr.vectorD().array() > 0.0).all())
+        throw fail("start: map_end: the saved robot covariance is not positive definite");
+      const Eigen::MatrixXd P_mr = P.bottomLeftCorner(cov.rows, k);
+      aug.idx = robot_idx_;
+      aug.J = P_rr.solve(P_mr.transpose()).transpose();
+      const Eigen::MatrixXd C = P_mm - aug.J * P_mr.transpose();
+      aug.C_new = 0.5 * (C + C.transpose());
+    } else {
+      aug.J = Eigen::MatrixXd::Zero(cov.rows, 0);
+      aug.C_new = P_mm;
+    }
+    const int first =
+        guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
+    if (first != k || estimator_->dim() != k + cov.rows)
+      throw fail("estimator '" + config_.estimator.plugin + "' put the map's " + std::to_string(cov.rows) +
+                 " rows at " + std::to_string(first) + " (expected " + std::to_string(k) + ")");
+  }
+  features_ = std::move(kept);
+  shared_ = std::move(shared);
+  map_session_ = report;
+  associator_.map_changed();
+}
+
+void Slam::skip_data_steps() {
+  DataStep skipped;
+  for (std::int64_t k = 0; k < config_.skip_steps; ++k)
+    if (!guarded(config_.source.instance, *source_lib_, "next", [&] { return source_->next(skipped); }))
+      throw ConfigError(config_.file.string() + ": run.skip_steps: the data ends after " + std::to_string(k) +
+                        " steps, before the " + std::to_string(config_.skip_steps) + " to skip");
+}
+
+Eigen::MatrixXd Slam::state_covariance(const std::vector<int>& idx) const {
+  if (!localizing()) return checked_marginal(idx);
+  // The robot's rows from the estimator, the map's from the loaded map; the
+  // two are uncorrelated (see the top of this file).
+  const int k = static_cast<int>(dofs_.size());
+  const auto n = static_cast<Eigen::Index>(idx.size());
+  Eigen::MatrixXd P = Eigen::MatrixXd::Zero(n, n);
+  std::vector<int> robot;
+  std::vector<Eigen::Index> at;
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (idx[static_cast<std::size_t>(i)] < k) {
+      robot.push_back(idx[static_cast<std::size_t>(i)]);
+      at.push_back(i);
+    }
+  if (!robot.empty()) {
+    const Eigen::MatrixXd R = checked_marginal(robot);
+    for (std::size_t a = 0; a < at.size(); ++a)
+      for (std::size_t b = 0; b < at.size(); ++b)
+        P(at[a], at[b]) = R(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
+  }
+  for (Eigen::Index a = 0; a < n; ++a) {
+    if (idx[static_cast<std::size_t>(a)] < k) continue;
+    for (Eigen::Index b = 0; b < n; ++b) {
+      if (idx[static_cast<std::size_t>(b)] < k) continue;
+      const auto it = map_prior_.find(entry_key(idx[static_cast<std::size_t>(a)], idx[static_cast<std::size_t>(b)]));
+      if (it != map_prior_.end()) P(a, b) = it->second;
+    }
+  }
+  return P;
+}
+
+void Slam::consider_map_uncertainty(const MapFeature& mf, LinearizedObservation& o) const {
+  const auto k = static_cast<Eigen::Index>(robot_idx_.size());
+  const Eigen::MatrixXd J_f = o.J.rightCols(o.J.cols() - k);
+  o.C_eta += J_f * state_covariance(mf.state_idx) * J_f.transpose();  // C_η + J_f P_ff J_fᵀ
+  o.J = o.J.leftCols(k).eval();
+  o.idx = robot_idx_;
+}
+
+std::optional<Slam::MapSessionReport> Slam::map_session_report() const {
+  if (!map_session_) return std::nullopt;
+  MapSessionReport r = *map_session_;
+  r.added = static_cast<int>(stats_.created);
+  std::unordered_map<int, const MapFeature*> now;
+  for (const MapFeature& mf : features_) now[mf.id] = &mf;
+  for (const auto& [id, state] : loaded_state_) {
+    const auto it = now.find(id);
+    if (it == now.end() || it->second->feature->mspace_dim() != state.second ||
+        it->second->feature->coords() != state.first)
+      ++r.changed;
+  }
+  return r;
+}
+
+}  // namespace mspace::kernel
