@@ -673,8 +673,18 @@ MatchResult ReferenceScan::match_once(const ScanPoints& all_current, const Eigen
   // is 3 on simulated buildings); plus the seed prior.
   const double scale = std::max(result.rms, noise_);
   const double to_measured = scale > 0.0 ? point_sigma_ * point_sigma_ / (scale * scale) : 1.0;
-  const Eigen::Matrix3d info = result.ok ? Eigen::Matrix3d(best.information * to_measured / options_.information_deflation)
-                                         : Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d info = result.ok ? Eigen::Matrix3d(best.information * to_measured / options_.information_deflation)
+                                   : Eigen::Matrix3d::Zero();
+  // A direction with next to no information (below 1e-3 of the trace: along a
+  // featureless corridor) holds only what the fitted normals' own noise puts
+  // there; it is left to the seed prior rather than claimed.
+  if (result.ok) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> split(info);
+    Eigen::Vector3d values = split.eigenvalues();
+    for (int k = 0; k < 3; ++k)
+      if (values[k] < 1e-3 * info.trace()) values[k] = 0.0;
+    info = split.eigenvectors() * values.asDiagonal() * split.eigenvectors().transpose();
+  }
   result.covariance = (info + Eigen::Matrix3d(prior.asDiagonal())).inverse();
   // Weakest direction: the information's smallest eigenpair, θ in metres at
   // 1 m (D = diag(1, 1, 1/1 m) leaves the numbers as they are).
