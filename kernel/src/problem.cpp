@@ -91,13 +91,13 @@ void Problem::start(const Eigen::MatrixXd& P0) {
   factors_.push_back(std::move(f));
 }
 
-void Problem::motion(const Eigen::VectorXd& x_d, double dt, std::size_t record) {
+void Problem::motion(const Eigen::VectorXd& x_d, double dt, std::size_t record, const Eigen::MatrixXd& C_d) {
   if (x_d.size() == 0 || nodes_.empty()) return;
   if (current_) {  // the newest node keeps the value it has before the robot moves
     nodes_.back() = *c_.x_r;
     current_ = false;
   }
-  pending_.emplace_back(x_d, dt);
+  pending_.push_back({x_d, dt, C_d});
   pending_records_.push_back(record);
 }
 
@@ -344,8 +344,9 @@ void Problem::smoothed(std::vector<StampedPose>& trajectory, std::vector<Stamped
     if (f->kind != FactorKind::Motion || f->odometry.empty()) continue;
     poses.clear();
     Pose6 x = node_value(f->from);
-    for (const auto& [u, dt] : f->odometry) {
-      x = guarded(c_.motion_instance, *c_.motion_lib, "predict", [&] { return c_.motion->predict(x, u, dt); }).pose;
+    for (const OdometryIncrement& u : f->odometry) {
+      x = guarded(c_.motion_instance, *c_.motion_lib, "predict", [&] { return c_.motion->predict(x, u.x_d, u.dt); })
+              .pose;
       poses.push_back(x);
     }
     const Pose6 mismatch = pose_difference(node_value(f->to), x);
@@ -429,11 +430,12 @@ bool Problem::evaluate_motion(const Factor& f, FactorLinearization& out) {
   Pose6 x = node_value(f.from);
   Eigen::MatrixXd chain = Eigen::MatrixXd::Identity(k_, k_);
   Eigen::MatrixXd C = Eigen::MatrixXd::Zero(k_, k_);
-  for (const auto& [u, dt] : f.odometry) {
+  for (const OdometryIncrement& u : f.odometry) {
     const MotionPrediction p =
-        guarded(c_.motion_instance, *c_.motion_lib, "predict", [&] { return c_.motion->predict(x, u, dt); });
+        guarded(c_.motion_instance, *c_.motion_lib, "predict", [&] { return c_.motion->predict(x, u.x_d, u.dt); });
     chain = p.J_rr * chain;
-    C = p.J_rr * C * p.J_rr.transpose() + p.J_rd * p.C_d * p.J_rd.transpose();
+    const Eigen::MatrixXd& C_d = u.C_d.size() > 0 ? u.C_d : p.C_d;  // the data's covariance, when it has one
+    C = p.J_rr * C * p.J_rr.transpose() + p.J_rd * C_d * p.J_rd.transpose();
     x = p.pose;
   }
   const Pose6 d = pose_difference(node_value(f.to), x);

@@ -66,6 +66,15 @@ FeatureShape feature_shape(const MapFeature& mf);
 bool linearize_coincidence(const MapFeature& a, const MapFeature& b, Eigen::VectorXd& r, Eigen::MatrixXd& J,
                            std::vector<int>& idx);
 
+/// One step's odometry as a motion factor keeps it: x_d over dt, and its
+/// covariance from the data when the source gave one (else empty: the motion
+/// model's C_d).
+struct OdometryIncrement {
+  Eigen::VectorXd x_d;
+  double dt = 0.0;
+  Eigen::MatrixXd C_d;
+};
+
 class Problem final : public NonlinearProblem {
  public:
   /// The kernel state the problem reads and moves: the features (by
@@ -93,7 +102,9 @@ class Problem final : public NonlinearProblem {
   void start(const Eigen::MatrixXd& P0);
   /// Before the robot moves by the odometry increment x_d over dt (empty: no
   /// motion); `record` is the index the step will have in the trajectory.
-  void motion(const Eigen::VectorXd& x_d, double dt, std::size_t record);
+  /// C_d: the increment's covariance from the data (empty: the motion
+  /// model's, see DataStep::odometry_covariance).
+  void motion(const Eigen::VectorXd& x_d, double dt, std::size_t record, const Eigen::MatrixXd& C_d = {});
   /// The current pose becomes a pose node (no-op if it already is one);
   /// `record` is the index the step will have in the kernel's trajectory.
   void key_pose(std::size_t record);
@@ -195,7 +206,7 @@ class Problem final : public NonlinearProblem {
   std::vector<std::size_t> records_;  ///< trajectory index of each node
   bool current_ = false;      ///< the newest node is the current pose
   bool node_this_step_ = false;
-  std::vector<std::pair<Eigen::VectorXd, double>> pending_;  ///< odometry since the newest node
+  std::vector<OdometryIncrement> pending_;  ///< odometry since the newest node
   std::vector<std::size_t> pending_records_;                 ///< their trajectory indices
   Eigen::VectorXd acc_;  ///< accumulated perturbation of every estimator row (robot rows unused)
   std::vector<std::unique_ptr<Factor>> factors_;

@@ -32,7 +32,7 @@ struct Problem::Factor {
   int dim = 0;            ///< the feature's M-space dimension when recorded
   // motion
   int from = 0, to = 0;
-  std::vector<std::pair<Eigen::VectorXd, double>> odometry;
+  std::vector<OdometryIncrement> odometry;
   std::vector<std::size_t> odometry_records;  ///< trajectory index of each increment
   // The linearisation r = eta + J (x ⊟ x_lin): linear factors always, live
   // observations their newest one (kept for freezing). Columns: k per node

@@ -138,9 +138,10 @@ void Problem::save_state(StateWriter& out) const {
   put_ints(out, "pending_records", pending_records_);
   out.put("acc", acc_);
   FlatWriter pending;
-  for (const auto& [u, dt] : pending_) {
-    pending.vec(u);
-    pending.num(dt);
+  for (const OdometryIncrement& u : pending_) {
+    pending.vec(u.x_d);
+    pending.num(u.dt);
+    pending.mat(u.C_d);
   }
   out.put("pending", pending.column());
 
@@ -169,9 +170,10 @@ void Problem::save_state(StateWriter& out) const {
     w.num(f.from);
     w.num(f.to);
     w.num(static_cast<double>(f.odometry.size()));
-    for (const auto& [u, dt] : f.odometry) {
-      w.vec(u);
-      w.num(dt);
+    for (const OdometryIncrement& u : f.odometry) {
+      w.vec(u.x_d);
+      w.num(u.dt);
+      w.mat(u.C_d);
     }
     std::vector<int> records(f.odometry_records.begin(), f.odometry_records.end());
     w.ints(records);
@@ -215,12 +217,13 @@ void Problem::restore_state(const StateReader& in, const std::vector<MapFeature>
   if ((acc.cols() != 1 && acc.size() != 0) || acc.size() > state || !acc.allFinite())
     throw std::invalid_argument(context + ": 'acc' is not a finite column of at most " + std::to_string(state) +
                                 " rows");
-  std::vector<std::pair<Eigen::VectorXd, double>> pending(n_pending);
+  std::vector<OdometryIncrement> pending(n_pending);
   {
     FlatReader r(in.get("pending"), "pending");
-    for (auto& [u, dt] : pending) {
-      u = r.vec("odometry");
-      dt = r.num();
+    for (OdometryIncrement& u : pending) {
+      u.x_d = r.vec("odometry");
+      u.dt = r.num();
+      u.C_d = r.mat("odometry covariance");
     }
     r.finish();
   }
@@ -255,9 +258,10 @@ void Problem::restore_state(const StateReader& in, const std::vector<MapFeature>
     f->from = static_cast<int>(r.integer(0, last_node, "from"));
     f->to = static_cast<int>(r.integer(0, last_node, "to"));
     f->odometry.resize(static_cast<std::size_t>(r.integer(0, kMaxIndex, "odometry")));
-    for (auto& [u, dt] : f->odometry) {
-      u = r.vec("odometry");
-      dt = r.num();
+    for (OdometryIncrement& u : f->odometry) {
+      u.x_d = r.vec("odometry");
+      u.dt = r.num();
+      u.C_d = r.mat("odometry covariance");
     }
     const std::vector<int> odometry_records = r.ints(0, kMaxIndex, "odometry_records");
     if (odometry_records.size() != f->odometry.size()) r.fail("odometry_records do not match the odometry");

@@ -281,10 +281,23 @@ void Slam::predict(const DataStep& data) {
   const double dt = started_ ? data.t - t_ : 0.0;
   started_ = true;
   t_ = data.t;
-  if (problem_) problem_->motion(data.odometry, dt, trajectory_.size());
-  if (data.odometry.size() == 0) return;
+  if (data.odometry.size() == 0) {
+    if (problem_) problem_->motion(data.odometry, dt, trajectory_.size());
+    return;
+  }
   require_finite(data.odometry, "odometry increment", config_.source.instance, *source_lib_);
-  const MotionPrediction pred = guarded(config_.motion.instance, *motion_lib_, "predict",
+  // The increment's own covariance, when the source measured it (e.g. laser
+  // odometry's scan match), replaces the motion model's C_d in eq. 26.
+  const Eigen::MatrixXd& C_data = data.odometry_covariance;
+  if (C_data.size() > 0) {
+    if (C_data.rows() != data.odometry.size() || C_data.cols() != data.odometry.size())
+      throw PluginError(config_.source.instance + " (plugin '" + config_.source.plugin + "'): odometry_covariance is " +
+                        std::to_string(C_data.rows()) + " x " + std::to_string(C_data.cols()) + " for an increment of " +
+                        std::to_string(data.odometry.size()) + " values");
+    require_finite(C_data, "odometry_covariance", config_.source.instance, *source_lib_);
+  }
+  if (problem_) problem_->motion(data.odometry, dt, trajectory_.size(), C_data);
+  MotionPrediction pred = guarded(config_.motion.instance, *motion_lib_, "predict",
                                         [&] { return motion_->predict(x_r_, data.odometry, dt); });
   const int k = static_cast<int>(dofs_.size());
   if (pred.J_rr.rows() != k || pred.J_rr.cols() != k || pred.J_rd.rows() != k ||
@@ -295,6 +308,14 @@ void Slam::predict(const DataStep& data) {
   require_finite(pred.J_rr, "J_rr", config_.motion.instance, *motion_lib_);
   require_finite(pred.J_rd, "J_rd", config_.motion.instance, *motion_lib_);
   require_finite(pred.C_d, "C_d", config_.motion.instance, *motion_lib_);
+  if (C_data.size() > 0) {
+    if (C_data.rows() != pred.C_d.rows())
+      throw PluginError(config_.source.instance + " (plugin '" + config_.source.plugin +
+                        "'): odometry_covariance is " + std::to_string(C_data.rows()) + " x " +
+                        std::to_string(C_data.cols()) + " but motion model " + config_.motion.instance + " has " +
+                        std::to_string(pred.C_d.rows()) + " x " + std::to_string(pred.C_d.cols()));
+    pred.C_d = C_data;
+  }
 
   const Pose6 delta = pose_difference(pred.pose, x_r_);
   path_distance_ += delta.head<3>().norm() + kRotationWeightMetresPerRadian * delta.tail<3>().norm();

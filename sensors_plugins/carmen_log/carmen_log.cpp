@@ -127,10 +127,17 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   options.seed_sigma_xy = params.get_double("scan_match_seed_sigma_xy");
   options.seed_sigma_theta = params.get_double("scan_match_seed_sigma_theta_deg") * std::numbers::pi / 180.0;
   options.seed_gate = params.get_double("scan_match_seed_gate");
+  options.free_space_margin = params.get_double("scan_match_free_space_margin");
+  options.local_map_weight = params.get_double("scan_match_local_map_weight");
   const bool drop_moving = params.get_bool("scan_match_drop_moving");
+  const bool with_covariance = params.get_bool("scan_match_covariance");
   const double limit = params.get_double("scan_match_max_range");
   const double max_range = limit > 0.0 ? std::min(limit, log_.laser.no_return) : log_.laser.no_return;
   const scan_matching::LaserOdometry odometry(mount_, options);
+  scan_matching::LocalMapOptions local_options;
+  local_options.scans = static_cast<int>(params.get_int("scan_match_local_map"));
+  local_options.key_distance = params.get_double("scan_match_key_distance");
+  scan_matching::LocalMap local_map(odometry, local_options);
   std::vector<double> residuals;
   std::size_t kept_seed = 0, correlative = 0, disagreed = 0;
   Eigen::Vector3d previous_increment = Eigen::Vector3d::Zero();  // robot motion from scan i − 2 to i − 1
@@ -138,6 +145,7 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   covariances_.assign(log_.scans.size(), Eigen::Matrix3d::Zero());
   matched[0] = log_.scans[0].odometry;
   auto points_of = [&](const Scan& s) { return scan_matching::scan_to_points(s.ranges, s.bearings, max_range); };
+  local_map.add(0, points_of(log_.scans[0]), matched[0]);
   for (std::size_t i = 1; i < log_.scans.size(); ++i) {
     const Scan& previous = log_.scans[i - 1];
     const Scan& current = log_.scans[i];
@@ -148,19 +156,25 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
     const scan_matching::ReferenceScan reference =
         drop_moving && i >= 2 ? odometry.reference(points_of(previous), points_of(log_.scans[i - 2]), previous_increment)
                               : scan_matching::ReferenceScan(points_of(previous), options);
-    const scan_matching::OdometryResult r = odometry.match(reference, points_of(current), seed);
+    // With scan_match_local_map, the last key scans join the match (placed
+    // by the laser odometry so far); a failed match breaks that chain.
+    const scan_matching::ScanPoints current_points = points_of(current);
+    const scan_matching::OdometryResult r =
+        odometry.match(reference, current_points, seed, local_map.placed(i - 1, matched[i - 1]));
     previous_increment = r.increment;
+    matched[i] = apply_increment(matched[i - 1], r.increment);
+    if (r.match.ok) local_map.add(i, current_points, matched[i]);
+    else local_map.clear();
     disagreed += r.match.disagreed ? 1 : 0;
     if (r.match.ok) {
       residuals.push_back(r.match.rms);
-      covariances_[i] = r.covariance;
+      if (with_covariance) covariances_[i] = r.covariance;
       correlative += r.match.correlative ? 1 : 0;
     } else {
       ++kept_seed;
       log.debug("scan ", i, " (", file_, ":", current.line, "): scan match failed (", r.match.pairs, " pairs of ",
                 r.match.overlap, " overlapping points, rms ", r.match.rms, " m); wheel odometry kept");
     }
-    matched[i] = apply_increment(matched[i - 1], r.increment);
   }
   for (std::size_t i = 0; i < log_.scans.size(); ++i) log_.scans[i].odometry = matched[i];
   double median = 0.0;
@@ -205,7 +219,7 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
       param_string("odometry", "wheel",
                    "the odometry increments: the log's wheel odometry, or laser odometry (point-to-line ICP "
                    "between consecutive scans, seeded with the wheel odometry, which is kept where a match fails; "
-                   "each matched increment carries its covariance in DataStep::odometry_covariance)",
+                   "with scan_match_covariance each matched increment carries its covariance)",
                    {"wheel", "scan_matched"}),
       param_double("scan_match_max_range", 0.0,
                    "beams at or beyond this range (m) are not used by the scan matcher (0: every return)", 0.0),
@@ -227,6 +241,24 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
       param_bool("scan_match_drop_moving", false,
                  "drop points of the reference scan that the scan before it did not see there (moving people, "
                  "doors) before matching the next scan to it"),
+      param_int("scan_match_local_map", 0,
+                "key scans of the laser odometry's local map that each scan is matched against besides the "
+                "previous one (0: the previous scan alone); a scan becomes a key scan "
+                "scan_match_key_distance m (or 20 deg) from the last, keys over 5 m away are left out",
+                0, 50),
+      param_double("scan_match_key_distance", 0.5, "m between key scans of scan_match_local_map", 0.0),
+      param_double("scan_match_local_map_weight", 1.0,
+                   "weight of a key scan's residuals against the previous scan's (the keys are placed by the "
+                   "laser odometry so far, whose error they carry)",
+                   0.0, 1.0),
+      param_bool("scan_match_covariance", false,
+                 "hand each matched increment's covariance (from the match's information and residual, calibrated "
+                 "to NEES 3 on simulated buildings) to the run in DataStep::odometry_covariance, where it replaces "
+                 "the motion model's noise; false: the motion model's noise for every increment"),
+      param_double("scan_match_free_space_margin", 0.0,
+                   "points of the current scan that the previous or a key scan saw through, its beams ending more "
+                   "than this (m) beyond them, are taken to be moving and left out of the match (0: off)",
+                   0.0),
       param_string("ground_truth", "log",
                    "ground truth: `log` = the corrected poses of the log when it has them (table, GMapping log), "
                    "`none`, or a TUM file `t x y z qx qy qz qw` (time base of the log, time_offset added) whose "

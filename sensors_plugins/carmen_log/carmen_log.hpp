@@ -10,8 +10,9 @@
 //     first step has none. With `odometry: scan_matched` the increments are
 //     laser odometry (scan_matching/scan_matcher.hpp), seeded with the wheel
 //     odometry, for the laser at `laser_offset` (or the log's offset) on the
-//     robot, and DataStep::odometry_covariance is the match's covariance
-//     (empty where the match failed and the wheel increment was kept);
+//     robot, and with `scan_match_covariance: true` DataStep::odometry_covariance
+//     is the match's covariance (empty where the match failed and the wheel
+//     increment was kept);
 //   - one SensorReading on `channel` whose `values` has one row per beam, in
 //     beam order: (range, bearing) in m and rad in the laser frame, range 0
 //     for a beam with no return (the `laser_lines` extractor relies on the

@@ -173,6 +173,29 @@ ReferenceScan::ReferenceScan(const ScanPoints& points, const MatchOptions& optio
     max_bearing_ = *std::max_element(bearing.begin(), bearing.end());
   }
   full_circle_ = max_bearing_ - min_bearing_ > kTwoPi - 3.0 * spacing_;
+  beams_.reserve(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i)
+    beams_.emplace_back(bearing[static_cast<std::size_t>(i)], points[static_cast<std::size_t>(i)].norm());
+  std::sort(beams_.begin(), beams_.end());
+}
+
+bool ReferenceScan::sees_through(const Eigen::Vector2d& q, double margin) const {
+  if (beams_.empty()) return false;
+  const double b = std::atan2(q.y(), q.x());
+  const double r = q.norm();
+  const auto at = std::lower_bound(beams_.begin(), beams_.end(), std::make_pair(b, -1.0)) - beams_.begin();
+  const auto count = static_cast<long>(beams_.size());
+  bool any = false;
+  // A beam beside a near object's edge ends on the wall behind it: every beam
+  // around q's bearing must have ended beyond q, not just the nearest.
+  for (long k = at - 2; k <= at + 1; ++k) {
+    if (k < 0 || k >= count) continue;
+    const auto& [bearing, range] = beams_[static_cast<std::size_t>(k)];
+    if (std::abs(wrap(bearing - b)) > 1.5 * spacing_) continue;
+    if (range <= r + margin) return false;
+    any = true;
+  }
+  return any;
 }
 
 double ReferenceScan::beam_gap(double range) const {
@@ -456,7 +479,8 @@ struct ReferenceScan::Local {
 };
 
 ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::Vector3d& start,
-                                        const Eigen::Vector3d& seed, double first_distance) const {
+                                        const Eigen::Vector3d& seed, const std::vector<PlacedReference>& older,
+                                        double first_distance) const {
   Local out;
   Eigen::Vector3d T = start;
   // The weak prior Λ = diag(1/σ_xy², 1/σ_xy², 1/σ_θ²) on the seed keeps a
@@ -465,7 +489,29 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
                               1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
                               1.0 / (options_.seed_sigma_theta * options_.seed_sigma_theta));
   const double point_weight = 1.0 / (point_sigma_ * point_sigma_);
+  // The references: this scan (at the identity) and the local map's older
+  // scans at their poses P in this frame.
+  std::vector<PlacedReference> layers{{this, Eigen::Vector3d::Zero()}};
+  for (const PlacedReference& o : older)
+    if (o.scan != nullptr && !o.scan->points_.empty()) layers.push_back(o);
+  // Step 9: current points some reference saw through (moving), re-checked
+  // every few iterations at the estimate so far.
+  const double free_margin =
+      options_.free_space_margin > 0.0 ? std::max(options_.free_space_margin, 10.0 * noise_) : 0.0;
+  std::vector<char> moving(current.size(), 0);
+  std::vector<Eigen::Matrix2d> layer_rotations;  // R_Pᵀ of each layer
+  for (const PlacedReference& layer : layers) layer_rotations.push_back(rotation(layer.pose[2]).transpose());
+  auto mark_moving = [&](const Eigen::Vector3d& pose) {
+    const Eigen::Matrix2d Rm = rotation(pose[2]);
+    for (std::size_t i = 0; i < current.size(); ++i) {
+      const Eigen::Vector2d q = Rm * current[i] + pose.head<2>();
+      moving[i] = 0;
+      for (std::size_t l = 0; l < layers.size() && !moving[i]; ++l)
+        moving[i] = layers[l].scan->sees_through(layer_rotations[l] * (q - layers[l].pose.head<2>()), free_margin);
+    }
+  };
   for (int it = 0; it < options_.max_iterations; ++it) {
+    if (free_margin > 0.0 && it % 5 == 0) mark_moving(T);
     const double max_distance =
         correspondence_distance(std::max(first_distance > 0.0 ? first_distance : options_.max_correspondence,
                                          min_correspondence_),
@@ -473,39 +519,57 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
                                 options_.max_iterations, it);
     const Eigen::Matrix2d R = rotation(T[2]);
     const Eigen::Matrix2d dR = rotation(T[2] + 0.5 * std::numbers::pi);  // ∂R/∂θ
-    Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+    Eigen::Matrix3d H = Eigen::Matrix3d::Zero(), H_own = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     double weighted_r2 = 0.0, weight_sum = 0.0;
     int pairs = 0, overlap = 0;
-    for (const auto& q : current) {
-      const Eigen::Vector2d moved = R * q + T.head<2>();
-      if (in_view(moved)) ++overlap;
-      const int j = nearest_by_bearing(moved);
-      if (j < 0) continue;
-      const Eigen::Vector2d d = moved - points_[static_cast<std::size_t>(j)];
-      const Eigen::Vector2d& n = normals_[static_cast<std::size_t>(j)];
-      const double r = n.dot(d);  // across the line
-      // Gate: the point-to-line residual within the correspondence distance,
-      // and the partner within that distance too or, where the beams are
-      // sparser (far away), within gate_beams beam spacings at its range: the
-      // nearest beam on the same wall can be that far along it.
-      const double gate =
-          std::max(max_distance, options_.gate_beams * points_[static_cast<std::size_t>(j)].norm() * spacing_);
-      if (std::abs(r) > max_distance || d.squaredNorm() > gate * gate) continue;
-      const double w = std::abs(r) <= huber_ ? 1.0 : huber_ / std::abs(r);
-      // ∂r/∂(dx, dy, dθ) = (nᵀ, nᵀ ∂R/∂θ q).
-      const Eigen::Vector3d J(n.x(), n.y(), n.dot(dR * q));
-      H.noalias() += w * J * J.transpose();
-      g += w * J * r;
-      weighted_r2 += w * r * r;
-      weight_sum += w;
-      ++pairs;
+    for (const PlacedReference& layer : layers) {
+      const ReferenceScan& ref = *layer.scan;
+      const double layer_weight = layer.scan == this ? 1.0 : options_.local_map_weight;
+      // A point q' in this frame is P⁻¹ q' = R_Pᵀ (q' − t_P) in the layer's
+      // own frame, where it is paired by bearing (that scan's beams could
+      // have seen it). Its partner's normal n there is R_P n here.
+      const Eigen::Matrix2d Rp = rotation(layer.pose[2]);
+      const Eigen::Matrix2d Rpt = Rp.transpose();
+      for (std::size_t i = 0; i < current.size(); ++i) {
+        const Eigen::Vector2d& q = current[i];
+        const Eigen::Vector2d moved = R * q + T.head<2>();
+        const Eigen::Vector2d local = Rpt * (moved - layer.pose.head<2>());
+        if (ref.in_view(local)) ++overlap;
+        if (moving[i]) continue;
+        const int j = ref.nearest_by_bearing(local);
+        if (j < 0) continue;
+        const Eigen::Vector2d& p = ref.points_[static_cast<std::size_t>(j)];
+        const Eigen::Vector2d d = local - p;
+        const Eigen::Vector2d& n_local = ref.normals_[static_cast<std::size_t>(j)];
+        const double r = n_local.dot(d);  // across the line
+        // Gate: the point-to-line residual within the correspondence distance,
+        // and the partner within that distance too or, where the beams are
+        // sparser (far away), within gate_beams beam spacings at its range: the
+        // nearest beam on the same wall can be that far along it.
+        const double gate = std::max(max_distance, options_.gate_beams * p.norm() * ref.spacing_);
+        if (std::abs(r) > max_distance || d.squaredNorm() > gate * gate) continue;
+        const double w = layer_weight * (std::abs(r) <= huber_ ? 1.0 : huber_ / std::abs(r));
+        // ∂r/∂(dx, dy, dθ) = (n'ᵀ, n'ᵀ ∂R/∂θ q) with n' = R_P n (eq. of the
+        // residual n'ᵀ(R q + t − R_P p − t_P)).
+        const Eigen::Vector2d n = Rp * n_local;
+        const Eigen::Vector3d J(n.x(), n.y(), n.dot(dR * q));
+        H.noalias() += w * J * J.transpose();
+        if (layer.scan == this) H_own.noalias() += w * J * J.transpose();
+        g += w * J * r;
+        weighted_r2 += w * r * r;
+        weight_sum += w;
+        ++pairs;
+      }
     }
     out.pairs = pairs;
     out.overlap = overlap;
     out.iterations = it + 1;
     out.T = T;
-    out.information = point_weight * H;
+    // The key scans pair the same current points again: their residuals
+    // share the current scan's noise and are no independent evidence, so the
+    // information reported (and the covariance) counts this scan's pairs only.
+    out.information = point_weight * H_own;
     if (pairs < std::max(3, options_.min_pairs)) {
       out.rms = std::numeric_limits<double>::infinity();
       return out;
@@ -526,9 +590,22 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
   return out;
 }
 
-MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vector3d& seed) const {
+MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vector3d& seed,
+                                 const std::vector<PlacedReference>& older) const {
   // Neighbouring beams of a dense scan (0.25°) on one wall add little: at most
   // max_points evenly spread beams are matched.
+  // A local map that cannot be matched (its key scans misplaced by an
+  // earlier error, or showing another room) must not cost the increment:
+  // the previous scan alone decides then.
+  if (!older.empty()) {
+    MatchResult with_map = match_once(all_current, seed, older);
+    if (with_map.ok) return with_map;
+  }
+  return match_once(all_current, seed, {});
+}
+
+MatchResult ReferenceScan::match_once(const ScanPoints& all_current, const Eigen::Vector3d& seed,
+                                      const std::vector<PlacedReference>& older) const {
   const ScanPoints current = subsample(all_current, options_.max_points);
   MatchResult result;
   result.noise = noise_;
@@ -539,10 +616,10 @@ MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vec
   };
   auto weak = [&](const Local& l) { return !ok(l) || l.pairs < options_.weak_pair_fraction * l.overlap; };
 
-  Local best = icp(current, heading_search(current, seed), seed);
+  Local best = icp(current, heading_search(current, seed), seed, older);
   bool from_correlative = false;
   if (options_.correlative && weak(best)) {
-    const Local other = icp(current, correlative_search(current, seed), seed);
+    const Local other = icp(current, correlative_search(current, seed), seed, older);
     // The better match: a valid one over an invalid one; between two valid
     // ones the correlative one only with clearly more pairs (a quarter more):
     // with about as many, the scene is ambiguous and the match nearer the
@@ -569,7 +646,7 @@ MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vec
       return (e[0] * e[0] + e[1] * e[1]) / sxy2 + e[2] * e[2] / sth2 > options_.seed_gate;
     };
     if (disagrees(best)) {
-      best = icp(current, seed, seed, min_correspondence_);
+      best = icp(current, seed, seed, older, min_correspondence_);
       from_correlative = false;
       result.disagreed = true;
       // Still pulled beyond the seed's uncertainty (something moving by less
@@ -588,10 +665,26 @@ MatchResult ReferenceScan::match(const ScanPoints& all_current, const Eigen::Vec
   const Eigen::Vector3d prior(1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
                               1.0 / (options_.seed_sigma_xy * options_.seed_sigma_xy),
                               1.0 / (options_.seed_sigma_theta * options_.seed_sigma_theta));
-  // Covariance of the increment: the pairs' information, deflated for the
-  // correlation of neighbouring beams on one wall, plus the seed prior.
-  const Eigen::Matrix3d info = result.ok ? Eigen::Matrix3d(best.information / options_.information_deflation)
-                                         : Eigen::Matrix3d::Zero();
+  // Covariance of the increment: the pairs' information at the residual
+  // scale this match measured, s² = max(rms, σ_n)² (it holds both scans' noise
+  // and whatever the line model misses: clutter, corners), in place of the
+  // nominal point_sigma; deflated for the correlation of neighbouring beams on
+  // one wall (information_deflation, calibrated so that the increments' NEES
+  // is 3 on simulated buildings); plus the seed prior.
+  const double scale = std::max(result.rms, noise_);
+  const double to_measured = scale > 0.0 ? point_sigma_ * point_sigma_ / (scale * scale) : 1.0;
+  Eigen::Matrix3d info = result.ok ? Eigen::Matrix3d(best.information * to_measured / options_.information_deflation)
+                                   : Eigen::Matrix3d::Zero();
+  // A direction with next to no information (below 1e-3 of the trace: along a
+  // featureless corridor) holds only what the fitted normals' own noise puts
+  // there; it is left to the seed prior rather than claimed.
+  if (result.ok) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> split(info);
+    Eigen::Vector3d values = split.eigenvalues();
+    for (int k = 0; k < 3; ++k)
+      if (values[k] < 1e-3 * info.trace()) values[k] = 0.0;
+    info = split.eigenvectors() * values.asDiagonal() * split.eigenvectors().transpose();
+  }
   result.covariance = (info + Eigen::Matrix3d(prior.asDiagonal())).inverse();
   // Weakest direction: the information's smallest eigenpair, θ in metres at
   // 1 m (D = diag(1, 1, 1/1 m) leaves the numbers as they are).
@@ -636,14 +729,39 @@ ReferenceScan LaserOdometry::reference(const ScanPoints& previous, const ScanPoi
 }
 
 OdometryResult LaserOdometry::match(const ReferenceScan& previous, const ScanPoints& current,
-                                    const Eigen::Vector3d& robot_seed) const {
+                                    const Eigen::Vector3d& robot_seed, const std::vector<PlacedReference>& older) const {
   OdometryResult out;
-  out.match = previous.match(current, laser_increment(robot_seed));
+  out.match = previous.match(current, laser_increment(robot_seed), older);
   Eigen::Matrix3d J;
   out.increment = out.match.ok ? robot_increment(out.match.increment, &J) : robot_seed;
   if (!out.match.ok) robot_increment(out.match.increment, &J);
   // C_r = J C_l Jᵀ (first order; exact for the translation part).
   out.covariance = J * out.match.covariance * J.transpose();
+  return out;
+}
+
+// ---- Local map ---------------------------------------------------------------
+
+void LocalMap::add(std::size_t index, const ScanPoints& points, const Eigen::Vector3d& robot_pose) {
+  if (options_.scans <= 0) return;
+  const Eigen::Vector3d laser_pose = compose(robot_pose, mount_);
+  if (!keys_.empty()) {
+    const Eigen::Vector3d d = compose(inverse(keys_.back().laser_pose), laser_pose);
+    if (d.head<2>().norm() < options_.key_distance && std::abs(d[2]) < options_.key_turn) return;
+  }
+  keys_.push_back({index, ReferenceScan(points, match_options_), laser_pose});
+  if (static_cast<int>(keys_.size()) > options_.scans) keys_.erase(keys_.begin());
+}
+
+std::vector<PlacedReference> LocalMap::placed(std::size_t index, const Eigen::Vector3d& robot_pose) const {
+  std::vector<PlacedReference> out;
+  const Eigen::Vector3d frame = inverse(compose(robot_pose, mount_));
+  for (const Key& key : keys_) {
+    if (key.index == index) continue;  // the reference scan itself
+    const Eigen::Vector3d pose = compose(frame, key.laser_pose);
+    if (pose.head<2>().norm() > options_.max_distance) continue;
+    out.push_back({&key.scan, pose});
+  }
   return out;
 }
 

@@ -59,7 +59,20 @@
 //     disagrees, the seed is kept. Needs σ_xy, σ_θ at the odometry's real
 //     per-step error (with the weak default prior it would undo the
 //     correlative search's recoveries from far seeds).
-//  8. Moving points (drop_moving, given the scan before the reference and
+//  8. Local map (LocalMap, when older scans are given): the Gauss–Newton of
+//     4 sums the point-to-line residuals of the current scan against each of
+//     the last few key scans too, each placed in the reference's frame by the
+//     laser odometry already found, and paired by bearing in that scan's own
+//     frame. A person walking along a corridor is then one moving thing
+//     against several views of the static walls, and a sparse log (scans
+//     1–2 s apart) gets the overlap of several scans instead of one.
+//  9. Free space (free_space_margin > 0): a current point placed in a
+//     reference scan (the previous one or a key scan) where that scan's beams
+//     passed through and ended well beyond it was not there then: a person
+//     walking. Such points are left out of the pairing, re-checked every few
+//     iterations at the current estimate. With key scans 0.5 m or more apart a
+//     person walking along with the robot is seen through by some of them.
+// 10. Moving points (drop_moving, given the scan before the reference and
 //     the increment between them): reference points that the older scan saw
 //     no surface at are dropped before matching. Alone it is not enough: one
 //     slipped increment makes the next filter keep the mover and drop static
@@ -118,9 +131,12 @@ struct MatchOptions {
   double max_rms = 0.05;            ///< m: larger final robust RMS (and > 3 σ_n) fails the match
   double converged_step = 1e-5;     ///< stop when the update is below this (m and rad)
   /// Residuals of neighbouring beams on one wall are correlated (a wall is one
-  /// measurement, not N): the information Σ JᵀJ/σ² is divided by this for the
-  /// covariance handed to the motion model.
-  double information_deflation = 10.0;
+  /// measurement, not N): the information Σ JᵀJ/s² (s the match's measured
+  /// residual RMS) is divided by this for the covariance handed to the motion
+  /// model. 1.6: the mean NEES of the increments was 4.81 with 1 on a
+  /// simulated building (l_ring, seed 3, 150 m, no people, bench_scan_slips),
+  /// 3 is right for 3 dof.
+  double information_deflation = 1.6;
   // Correlative search (fallback when the local match is weak).
   bool correlative = true;
   double weak_pair_fraction = 0.5;     ///< pairs below this fraction of the overlap: search
@@ -141,6 +157,12 @@ struct MatchOptions {
   /// check is only as good as seed_sigma_*: set them to the wheel odometry's
   /// real per-step error.
   double seed_gate = 0.0;
+  /// Free-space check (step 9; 0: off): a current point that a reference
+  /// scan's beams saw through — the beam at its bearing, and its neighbours,
+  /// ended more than this (m, or 10 σ_n) beyond it — was not there when that
+  /// scan was taken: something moving (a person), left out of the ICP.
+  double free_space_margin = 0.0;
+  double local_map_weight = 1.0;
   // Moving objects (ReferenceScan::drop_moving, when an older scan is given).
   double moving_distance = 0.05;       ///< m: a reference point farther than this (or 4 σ_n) from the older scan's surface has moved
   double moving_max_fraction = 0.3;    ///< more of the usable points than this inconsistent: the older pose is wrong, keep all
@@ -156,9 +178,12 @@ struct MatchResult {
   bool correlative = false;  ///< the correlative search seeded the kept match
   bool disagreed = false;    ///< the match disagreed with the seed (seed_gate): the tight match from the seed (or the seed) kept
   double noise = 0.0;        ///< σ_n: range noise estimated from the reference scan (m)
-  /// Σ JᵀJ/σ² over the pairs (no prior), in (m, m, rad): what the laser alone says.
+  /// Σ JᵀJ/σ² over the pairs with the reference scan (no prior, not the
+  /// local map's key scans), in (m, m, rad): what the laser alone says.
   Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
-  /// (information / information_deflation + seed prior)⁻¹: the increment's covariance.
+  /// (information · σ_p²/s² / information_deflation + seed prior)⁻¹: the
+  /// increment's covariance (σ_p the point sigma the information used, s the
+  /// match's residual RMS, at least σ_n).
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();
   /// Smallest eigenvalue of the information with θ expressed in metres at 1 m
   /// (so translation and rotation compare), and its unit eigenvector (dx, dy, dθ·1 m):
@@ -167,14 +192,28 @@ struct MatchResult {
   Eigen::Vector3d weakest_direction = Eigen::Vector3d::Zero();
 };
 
+class ReferenceScan;
+
+/// An older reference scan placed in the matching frame (the frame of the
+/// reference scan `match` is called on): `pose` is the older scan's pose there.
+struct PlacedReference {
+  const ReferenceScan* scan = nullptr;
+  Eigen::Vector3d pose = Eigen::Vector3d::Zero();
+};
+
 /// A reference scan prepared once (normals fitted, points indexed by bearing,
 /// noise estimated) and matched against any number of scans.
 class ReferenceScan {
  public:
   ReferenceScan(const ScanPoints& points, const MatchOptions& options);
 
-  /// Matches `current` starting from `seed` (current scan's pose in this scan's frame).
-  MatchResult match(const ScanPoints& current, const Eigen::Vector3d& seed) const;
+  /// Matches `current` starting from `seed` (current scan's pose in this scan's
+  /// frame). `older`: further reference scans of the local map, placed in this
+  /// scan's frame, whose residuals join the ICP's (step 8); the heading and
+  /// correlative searches use this scan alone. When the match with them is
+  /// not ok, the match with this scan alone is returned.
+  MatchResult match(const ScanPoints& current, const Eigen::Vector3d& seed,
+                    const std::vector<PlacedReference>& older = {}) const;
 
   /// Drops the reference points that are not where an older scan of the same
   /// place saw a surface: things that moved between the two scans (people
@@ -198,11 +237,14 @@ class ReferenceScan {
 
  private:
   struct Local;  // one ICP run's result
+  /// match() with the given references (no fallback to this scan alone).
+  MatchResult match_once(const ScanPoints& current, const Eigen::Vector3d& seed,
+                         const std::vector<PlacedReference>& older) const;
   /// Point-to-line ICP from `start` (the prior stays on `seed`).
   /// `first_distance` > 0: the correspondence distance of the first
   /// iteration (else max_correspondence).
   Local icp(const ScanPoints& current, const Eigen::Vector3d& start, const Eigen::Vector3d& seed,
-            double first_distance = 0.0) const;
+            const std::vector<PlacedReference>& older, double first_distance = 0.0) const;
   /// The seed with the heading of most overlap within ± heading_search.
   Eigen::Vector3d heading_search(const ScanPoints& current, const Eigen::Vector3d& seed) const;
   /// Best pose of the correlative search around `seed` (Olson 2009), or the seed.
@@ -212,6 +254,10 @@ class ReferenceScan {
   int nearest_by_bearing(const Eigen::Vector2d& q) const;
   /// Largest gap between neighbouring beams at range ρ (m).
   double beam_gap(double range) const;
+  /// Whether this scan's beams passed q (in this frame) and ended more than
+  /// `margin` beyond it: every beam within 1.5 spacings of q's bearing, at
+  /// least one (step 9).
+  bool sees_through(const Eigen::Vector2d& q, double margin) const;
   bool in_view(const Eigen::Vector2d& q) const;
 
   MatchOptions options_;
@@ -219,6 +265,7 @@ class ReferenceScan {
   std::vector<Eigen::Vector2d> normals_;  ///< unit normal of each
   std::vector<double> bearings_;          ///< bearing of each (ascending)
   ScanPoints all_points_;                 ///< every reference point, in beam order (for the correlative grid)
+  std::vector<std::pair<double, double>> beams_;  ///< (bearing, range) of every point, by bearing (free space)
   double noise_ = 0.0;
   double spacing_ = 0.0;
   double min_bearing_ = 0.0, max_bearing_ = 0.0, max_range_ = 0.0;
@@ -246,8 +293,9 @@ class LaserOdometry {
   /// seeded with the robot motion `robot_seed` (wheel odometry). When the match
   /// fails, increment = robot_seed and match.ok = false.
   OdometryResult match(const ScanPoints& previous, const ScanPoints& current, const Eigen::Vector3d& robot_seed) const;
-  OdometryResult match(const ReferenceScan& previous, const ScanPoints& current,
-                       const Eigen::Vector3d& robot_seed) const;
+  /// `older`: the local map's key scans placed in `previous`'s laser frame (LocalMap::placed).
+  OdometryResult match(const ReferenceScan& previous, const ScanPoints& current, const Eigen::Vector3d& robot_seed,
+                       const std::vector<PlacedReference>& older = {}) const;
   /// The laser scan `previous` prepared as a reference with its moving points
   /// dropped against `older` (the scan before it), `robot_older_increment`
   /// being the robot motion from `older` to `previous` (ReferenceScan::drop_moving).
@@ -265,6 +313,45 @@ class LaserOdometry {
  private:
   Eigen::Vector3d mount_;
   MatchOptions options_;
+};
+
+/// The local map of step 8: the last few key scans of a laser odometry with
+/// their robot poses in the odometry's frame. A matched scan becomes a key
+/// scan when it lies at least key_distance (or key_turn) from the newest one;
+/// the oldest go beyond `scans`, and keys farther than max_distance from the
+/// scan being matched are left out (they see other rooms).
+struct LocalMapOptions {
+  int scans = 0;              ///< key scans kept (0: no local map, the previous scan alone)
+  double key_distance = 0.5;  ///< m
+  double key_turn = 0.35;     ///< rad
+  double max_distance = 5.0;  ///< m
+};
+
+class LocalMap {
+ public:
+  LocalMap(const LaserOdometry& odometry, const LocalMapOptions& options)
+      : mount_(odometry.mount()), match_options_(odometry.options()), options_(options) {}
+
+  /// Scan `index` (points in its laser frame), matched, at robot pose `robot_pose`.
+  void add(std::size_t index, const ScanPoints& points, const Eigen::Vector3d& robot_pose);
+  /// The key scans other than scan `index`, placed in the laser frame of the
+  /// scan `index` at robot pose `robot_pose` (for LaserOdometry::match with
+  /// that scan as the reference).
+  std::vector<PlacedReference> placed(std::size_t index, const Eigen::Vector3d& robot_pose) const;
+  /// Forgets every key scan (the odometry chain broke, e.g. a failed match).
+  void clear() { keys_.clear(); }
+  std::size_t size() const { return keys_.size(); }
+
+ private:
+  struct Key {
+    std::size_t index;
+    ReferenceScan scan;
+    Eigen::Vector3d laser_pose;  ///< in the odometry frame: robot pose ⊕ mount
+  };
+  Eigen::Vector3d mount_;
+  MatchOptions match_options_;
+  LocalMapOptions options_;
+  std::vector<Key> keys_;  ///< oldest first
 };
 
 }  // namespace mspace::scan_matching

@@ -255,6 +255,7 @@ TEST(CarmenLaser, IssueLogReadsItsLaserFromTheDataAndMatches) {
   const std::vector<Eigen::Vector3d> truth = laser_log::write(file, {});
   PluginArgs a = args_for(file);
   a.params.set("odometry", std::string("scan_matched"));
+  a.params.set("scan_match_covariance", true);
   CarmenLogSource source(a);
   const LaserFacts& facts = source.contents().laser;
   ASSERT_TRUE(facts.detected_no_return);

@@ -404,3 +404,116 @@ TEST(ScanMatcher, IntelIncrementsAgainstGMapping) {
 }
 
 }  // namespace
+
+namespace {
+
+struct IntelFigures {
+  std::vector<double> xy, th;  ///< per-step errors against GMapping (m, rad)
+  int failed = 0;
+  double nees_mean = 0.0, nees_median = 0.0;          ///< of the matched increments' covariances
+  double nees_ref_mean = 0.0, nees_ref_median = 0.0;  ///< with the reference's pose noise added
+  Eigen::Vector3d lag1_correlation = Eigen::Vector3d::Zero();
+};
+
+/// Laser odometry over the Intel scans (the previous scan, plus `map_scans`
+/// key scans 0.3 m apart), against the GMapping increments.
+IntelFigures intel_laser_odometry(const std::vector<mspace::carmen_log::Scan>& scans, const sm::MatchOptions& options,
+                                  int map_scans) {
+  const sm::LaserOdometry odometry(Eigen::Vector3d::Zero(), options);
+  sm::LocalMapOptions map_options;
+  map_options.scans = map_scans;
+  map_options.key_distance = 0.3;
+  sm::LocalMap map(odometry, map_options);
+  auto points_of = [](const mspace::carmen_log::Scan& s) { return sm::scan_to_points(s.ranges, s.bearings, 30.0); };
+  Eigen::Vector3d pose = scans[0].odometry;
+  map.add(0, points_of(scans[0]), pose);
+  IntelFigures f;
+  std::vector<Eigen::Vector3d> errors;
+  std::vector<Eigen::Matrix3d> covariances;
+  std::vector<double> nees;
+  for (std::size_t i = 1; i < scans.size(); ++i) {
+    const auto& p = scans[i - 1];
+    const auto& c = scans[i];
+    const Eigen::Vector3d gt = relative(*p.ground_truth, *c.ground_truth);
+    const Eigen::Vector3d wheel = relative(p.odometry, c.odometry);
+    const sm::ScanPoints current = points_of(c);
+    const sm::OdometryResult r =
+        odometry.match(sm::ReferenceScan(points_of(p), options), current, wheel, map.placed(i - 1, pose));
+    pose = sm::compose(pose, r.increment);
+    Eigen::Vector3d e = r.increment - gt;
+    e[2] = std::remainder(e[2], 2 * std::numbers::pi);
+    f.xy.push_back(e.head<2>().norm());
+    f.th.push_back(std::abs(e[2]));
+    if (r.match.ok) {
+      map.add(i, current, pose);
+      errors.push_back(e);
+      covariances.push_back(r.covariance);
+      nees.push_back(e.dot(r.covariance.ldlt().solve(e)));
+    } else {
+      ++f.failed;
+      map.clear();
+    }
+  }
+  // Why the NEES against GMapping is high: the reference's own pose errors.
+  // An error ε_k of the k-th reference pose enters increments k and k + 1
+  // with opposite signs, so the increment errors have lag-1 covariance
+  // −Cov(ε) and variance Var(laser) + 2 Cov(ε), where the laser odometry's
+  // errors of successive matches are independent (previous scan alone).
+  Eigen::Vector3d var = Eigen::Vector3d::Zero(), lag1 = Eigen::Vector3d::Zero();
+  for (std::size_t k = 1; k < errors.size(); ++k) {
+    var += errors[k].cwiseProduct(errors[k]);
+    lag1 += errors[k].cwiseProduct(errors[k - 1]);
+  }
+  f.lag1_correlation = lag1.cwiseQuotient(var);
+  const Eigen::Matrix3d reference_share = (2.0 * (-lag1 / static_cast<double>(errors.size() - 1)).cwiseMax(0.0)).asDiagonal();
+  std::vector<double> nees_ref;
+  for (std::size_t k = 0; k < errors.size(); ++k)
+    nees_ref.push_back(errors[k].dot((covariances[k] + reference_share).ldlt().solve(errors[k])));
+  auto mean = [](const std::vector<double>& v) {
+    double m = 0.0;
+    for (double x : v) m += x / static_cast<double>(v.size());
+    return m;
+  };
+  f.nees_mean = mean(nees);
+  f.nees_median = quantile(nees, 0.5);
+  f.nees_ref_mean = mean(nees_ref);
+  f.nees_ref_median = quantile(nees_ref, 0.5);
+  std::printf("local map %d: xy median %.4f m p95 %.4f m, heading median %.3f deg p95 %.3f deg; %d failed; NEES mean "
+              "%.2f median %.2f; lag-1 correlation x %.2f y %.2f θ %.2f; NEES with the reference's pose noise "
+              "(σ %.4f m, %.4f m, %.3f deg) mean %.2f median %.2f\n",
+              map_scans, quantile(f.xy, 0.5), quantile(f.xy, 0.95), quantile(f.th, 0.5) / kDeg,
+              quantile(f.th, 0.95) / kDeg, f.failed, f.nees_mean, f.nees_median, f.lag1_correlation[0],
+              f.lag1_correlation[1], f.lag1_correlation[2], std::sqrt(0.5 * reference_share(0, 0)),
+              std::sqrt(0.5 * reference_share(1, 1)), std::sqrt(0.5 * reference_share(2, 2)) / kDeg, f.nees_ref_mean,
+              f.nees_ref_median);
+  return f;
+}
+
+// Intel with the local map (issue 18): each scan matched against the previous
+// one and the last 4 key scans (weight 0.3), with the free-space check, as a
+// log whose wheels cannot vouch for a centimetre would be run: per step
+// against GMapping unchanged (medians within 1 % of the previous scan alone,
+// IntelIncrementsAgainstGMapping's figures; measured 2.24 cm / 0.349°), all
+// matched. And why the increments' NEES against GMapping is high: with the
+// previous scan alone successive errors are anti-correlated (lag-1 −0.15 to
+// −0.20), the signature of GMapping's own pose noise (≈ 1.1 cm, 0.26° per
+// pose); with that share added the NEES falls from ≈ 370 to ≈ 7.6 (mean).
+TEST(ScanMatcher, IntelIncrementsWithTheLocalMap) {
+  const std::filesystem::path file =
+      std::filesystem::path(MSPACE_SOURCE_DIR).parent_path() / "shared/datasets/intel_lab/intel_910_scans.txt";
+  if (!std::filesystem::exists(file)) GTEST_SKIP() << "Intel Research Lab data not found at " << file;
+  const auto log = mspace::carmen_log::read_log(file, {});
+  ASSERT_EQ(log.scans.size(), 910u);
+  const IntelFigures plain = intel_laser_odometry(log.scans, sm::MatchOptions{}, 0);
+  EXPECT_LT(plain.lag1_correlation.maxCoeff(), -0.1);  // the reference's pose noise is in the errors
+  EXPECT_LT(plain.nees_ref_mean, 0.1 * plain.nees_mean);
+  sm::MatchOptions options;
+  options.free_space_margin = 0.15;
+  options.local_map_weight = 0.3;
+  const IntelFigures mapped = intel_laser_odometry(log.scans, options, 4);
+  EXPECT_EQ(mapped.failed, 0);
+  EXPECT_LE(quantile(mapped.th, 0.5), 1.01 * quantile(plain.th, 0.5));
+  EXPECT_LE(quantile(mapped.xy, 0.5), 1.01 * quantile(plain.xy, 0.5));
+}
+
+}  // namespace
