@@ -146,7 +146,14 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
                            static_cast<double>(s.loop_attempts), static_cast<double>(s.loop_closures),
                            static_cast<double>(s.loop_ambiguous), static_cast<double>(s.loop_merged),
                            static_cast<double>(s.loop_checked), static_cast<double>(s.loop_false),
-                           s.loop_worst_disagreement, s.seconds_loops}));
+                           s.loop_worst_disagreement, s.seconds_loops, static_cast<double>(s.loop_unconfirmed)}));
+  const PendingClosure& pending = pending_closure_;
+  run.put("loop_pending", row_of({pending.active ? 1.0 : 0.0, pending.motion.theta, pending.motion.t.x(),
+                                  pending.motion.t.y(), pending.motion.pivot.x(), pending.motion.pivot.y(),
+                                  pending.sigma_translation, pending.sigma_rotation}));
+  Eigen::MatrixXd pending_ids(static_cast<Eigen::Index>(pending.local_ids.size()), 1);
+  for (std::size_t i = 0; i < pending.local_ids.size(); ++i) pending_ids(static_cast<Eigen::Index>(i), 0) = pending.local_ids[i];
+  run.put("loop_pending_ids", pending_ids);
 
   // Every plugin object with run-time state (PSTA).
   for (const PluginRef& p : plugin_objects(config_, *source_, *source_lib_, *motion_, *motion_lib_, *estimator_,
@@ -258,7 +265,17 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     const Eigen::MatrixXd& seconds = get_state(run, "seconds", 1, 7, "run state");
     const Eigen::MatrixXd& nees = get_state(run, "nees", -1, 1, "run state");
     const Eigen::MatrixXd& association = get_state(run, "association", 1, 4, "run state");
-    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 11, "run state");
+    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 12, "run state");
+    const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, 8, "run state");
+    const Eigen::MatrixXd& pending_ids = get_state(run, "loop_pending_ids", -1, 1, "run state");
+    PendingClosure pending;
+    pending.active = pending_row(0, 0) != 0.0;
+    pending.motion = PlanarMotion{pending_row(0, 1), {pending_row(0, 2), pending_row(0, 3)},
+                                  {pending_row(0, 4), pending_row(0, 5)}};
+    pending.sigma_translation = pending_row(0, 6);
+    pending.sigma_rotation = pending_row(0, 7);
+    for (Eigen::Index i = 0; i < pending_ids.rows(); ++i)
+      pending.local_ids.push_back(static_cast<int>(integer_at(pending_ids.row(i), 0, 0, 1e9, "loop_pending_ids")));
     const Eigen::MatrixXd& record_path = get_state(run, "record_path", -1, 1, "run state");
     const Eigen::MatrixXd& loop_features =
         get_state(run, "loop_features", 4, static_cast<Eigen::Index>(features.size()), "run state");
@@ -308,6 +325,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     s.loop_false = integer_at(loops, 8, 0, 1e15, "loop_false");
     s.loop_worst_disagreement = loops(0, 9);
     s.seconds_loops = loops(0, 10);
+    s.loop_unconfirmed = integer_at(loops, 11, 0, 1e15, "loop_unconfirmed");
 
     // The nonlinear problem (after the estimator, whose rows it checks; its
     // live factors bind to the restored features).
@@ -332,6 +350,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     last_loop_attempt_path_ = loops(0, 0);
     last_loop_local_signature_ = static_cast<std::int64_t>(loops(0, 1));
     last_anchor_path_ = loops(0, 2);
+    pending_closure_ = std::move(pending);
   } catch (const PersistenceError&) {
     throw;
   } catch (const std::exception& e) {

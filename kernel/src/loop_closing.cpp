@@ -234,7 +234,14 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
         }
     };
     for (std::size_t i = 0; i < local.size(); ++i) {
+      // The partner test above at this angle: the rotated footprint must
+      // reach the old one with a translation inside the window (the swing
+      // of half an angle step is the only rotation left to allow for).
+      const Eigen::Vector2d turned = T0.apply(local_fp[i].centre);
+      const double slack = o.max_translation + local_fp[i].radius + (local_fp[i].centre - pivot).norm() * half_step;
       for (int j : partners[i]) {
+        const Footprint& fj = old_fp[static_cast<std::size_t>(j)];
+        if ((turned - fj.centre).norm() > slack + fj.radius) continue;
         if (!coincidence_residual(local[i], old[static_cast<std::size_t>(j)], T0, o.floor_sigma, res)) continue;
         // The angle grid is coarse: its half step enters as uncertainty.
         res.S += half_step * half_step * res.J.col(0) * res.J.col(0).transpose();

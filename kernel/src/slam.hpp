@@ -94,6 +94,7 @@ struct RunStats {
   std::int64_t loop_attempts = 0;   ///< map-matching searches (loop_closing.hpp)
   std::int64_t loop_closures = 0;   ///< accepted
   std::int64_t loop_ambiguous = 0;  ///< refused: another placement fitted nearly as well
+  std::int64_t loop_unconfirmed = 0;  ///< found, then not found again by the next search with new features
   std::int64_t loop_merged = 0;     ///< features found to duplicate older ones
   /// With ground truth: every accepted closure checked — the robot's pose
   /// after it, relative to its poses when it last saw the old features it
@@ -303,6 +304,16 @@ class Slam {
   /// seen only what it mapped itself on the way, so its drift against the
   /// old map grew.
   double last_anchor_path_ = 0.0;
+  /// A placement map matching found and has not yet confirmed: a closure is
+  /// made only when a later search, with local features this one did not
+  /// pair, finds the same placement (slam_loop_closure.cpp).
+  struct PendingClosure {
+    bool active = false;
+    PlanarMotion motion;
+    double sigma_translation = 0.0, sigma_rotation = 0.0;
+    std::vector<int> local_ids;  ///< feature ids of the local features it paired
+  };
+  PendingClosure pending_closure_;
   StepObserver step_observer_;
 
   // Saved maps (map_session.cpp).

@@ -14,6 +14,10 @@
 //              odometry may have had since the robot last matched a feature
 //              older than the local map (its last anchor in the old map):
 //              loop_drift_per_metre (and _deg_per_metre) of that path.
+// A placement is taken only when it is found twice: the next search, after
+// the robot has mapped more of the place, must find the same placement with
+// local features the first did not pair (a local map of a few metres fits
+// a wrong place by chance in a corridor with doors at a regular spacing).
 // An accepted closure declares each paired local feature a duplicate of its
 // old partner (MapFeature::merged_into: never associated again). With a
 // re-linearising estimator the recent trajectory and local map are first
@@ -163,6 +167,7 @@ void Slam::close_loops(const DataStep& data) {
   for (int i : nearby) old.push_back(shape(i));
   const MapMatch match = match_local_map(local, old, here, o);
   if (!match.accepted) {
+    pending_closure_ = PendingClosure{};  // a placement waiting for confirmation is not confirmed
     if (match.reason.rfind("ambiguous", 0) == 0) {
       ++stats_.loop_ambiguous;
       log_->info("step ", step_, ": loop closure refused, ", match.reason, " (", local.size(), " local, ", old.size(),
@@ -173,6 +178,50 @@ void Slam::close_loops(const DataStep& data) {
                   match.reason);
     }
     return;
+  }
+
+  // Confirmation: one local map can fit a wrong place by chance (a corridor
+  // with doors at a regular spacing, a wing like another); the next search,
+  // once the robot has mapped more of the place, must find the same
+  // placement with local features this one did not pair — independent
+  // evidence. The two agree when the robot's position and heading under
+  // both differ by less than 3σ of their difference (plus the local map's
+  // own distortion, floor_sigma).
+  {
+    std::vector<int> paired_ids;
+    for (const auto& [li, oi] : match.best.pairs)
+      paired_ids.push_back(features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)].id);
+    const PendingClosure& p = pending_closure_;
+    bool same = false, fresh = false;
+    if (p.active) {
+      const double st = std::hypot(p.sigma_translation, match.best.sigma_translation);
+      const double sr = std::hypot(p.sigma_rotation, match.best.sigma_rotation);
+      const double moved = (p.motion.apply(here) - match.best.motion.apply(here)).norm();
+      const double turned = std::abs(wrap_angle(p.motion.theta - match.best.motion.theta));
+      same = moved <= 3.0 * std::hypot(st, o.floor_sigma) && turned <= 3.0 * sr;
+      fresh = std::any_of(paired_ids.begin(), paired_ids.end(), [&](int id) {
+        return std::find(p.local_ids.begin(), p.local_ids.end(), id) == p.local_ids.end();
+      });
+      if (!same) {
+        ++stats_.loop_unconfirmed;
+        log_->info("step ", step_, ": map matching's placement of ", match.best.pairs.size(),
+                   " features differs from the previous search's by ", moved, " m, ",
+                   turned * 180.0 / std::numbers::pi, " deg: neither is taken");
+      }
+    }
+    if (!(same && fresh)) {
+      // Remember this placement (a placement confirmed but with nothing new
+      // keeps the first one's features) and wait for the next search.
+      if (!same)
+        pending_closure_ = PendingClosure{true, match.best.motion, match.best.sigma_translation,
+                                          match.best.sigma_rotation, paired_ids};
+      if (log_->enabled(LogLevel::Debug))
+        log_->debug("step ", step_, ": map matching placed ", match.best.pairs.size(), " of ", local.size(),
+                    " local features (", match.best.motion.t.norm(), " m, ",
+                    match.best.motion.theta * 180.0 / std::numbers::pi, " deg): waiting for the next search");
+      return;
+    }
+    pending_closure_ = PendingClosure{};
   }
 
   const PlanarMotion& T = match.best.motion;

@@ -5,7 +5,7 @@
 //
 //   build/bin/bench_sim_building [--plans ring,ladder,l_ring,long_loop,grid] [--seeds 1,2,3]
 //                                [--length-m 400] [--laser sick181] [--modes scan_matched,wheel]
-//                                [--out out/bench_sim_building]
+//                                [--out out/bench_sim_building] [--estimator smoother] [--loop-closing]
 //
 // For each plan and seed s (world seed = seed = s) it writes a data set with
 // mspace-sim-building's library into OUT/<plan>_<s>/ and runs the config on it
@@ -123,6 +123,8 @@ int main(int argc, char** argv) {
   double length = 400.0;
   std::vector<std::string> source_params, motion_params, laser_params;
   int people = -1;
+  std::string estimator;
+  bool loop_closing = false;
   CLI::App app{"config/sim_building.yaml on simulated buildings: relations of the SLAM run against its odometry"};
   app.add_option("--plans", plans, "comma-separated plan names or indices")->capture_default_str();
   app.add_option("--seeds", seeds, "comma-separated seeds (world seed = seed)")->capture_default_str();
@@ -135,14 +137,16 @@ int main(int argc, char** argv) {
   app.add_option("--people", people, "moving people in the buildings (-1: the plan's default)");
   app.add_option("--source-param", source_params, "override a source parameter, key=value (lists: a,b,c)");
   app.add_option("--motion-param", motion_params, "override a motion parameter, key=value (after the mode's)");
+  app.add_option("--estimator", estimator, "run this estimator plugin instead of the configuration's (e.g. smoother)");
+  app.add_flag("--loop-closing", loop_closing, "turn on map matching (association.loop_closing)");
   CLI11_PARSE(app, argc, argv);
 
   set_log_level(LogLevel::Warn);
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
-  std::printf("%-10s %4s %-12s %5s %5s | %-15s %-15s | %-15s %-15s | %6s %5s %6s %6s\n", "plan", "seed", "odometry",
+  std::printf("%-10s %4s %-12s %5s %5s | %-15s %-15s | %-15s %-15s | %6s %5s %6s %6s %s\n", "plan", "seed", "odometry",
               "short", "long", "odo short m/deg", "SLAM short", "odo long m/deg", "SLAM long", "ATE m", "walls",
-              "slam s", "data s");
+              "slam s", "data s", "loops");
   int worse = 0, runs = 0;
   try {
     for (const std::string& plan : split(plans)) {
@@ -176,6 +180,8 @@ int main(int argc, char** argv) {
             config.motion.params.set("theta_noise_per_m", 1.0);
             config.motion.params.set("theta_noise_floor", 0.1);
           }
+          if (!estimator.empty()) override_estimator(config, estimator, registry);
+          config.association.loop_closing = config.association.loop_closing || loop_closing;
           override_params(config.source, source_params);
           override_params(config.motion, motion_params);
           const std::vector<StampedPose> odometry = odometry_poses(config.source);
@@ -188,17 +194,23 @@ int main(int argc, char** argv) {
           const double slam_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
           const Score on = score(odometry, near), of = score(odometry, far);
           const Score sn = score(slam.trajectory(), near), sf = score(slam.trajectory(), far);
-          int walls = 0;
+          int walls = 0;  // (features of every type)
           for (const auto& [type, dims] : r.summary.features_by_dim)
             for (const auto& [dim, n] : dims) walls += n;
+          // Map matching: closures accepted / of them false against the ground truth.
+          const RunStats& st = slam.stats();
+          const std::string loops = config.association.loop_closing
+                                        ? std::to_string(st.loop_closures) + "/" + std::to_string(st.loop_false)
+                                        : std::string("-");
           ++runs;
           if (sf.translation > of.translation) ++worse;
           std::printf(
               "%-10s %4s %-12s %5zu %5zu | %6.3f / %5.2f  %6.3f / %5.2f  | %6.2f / %5.1f  %6.2f / %5.1f  | "
-              "%6.2f %5d %6.1f %6.0f\n",
+              "%6.2f %5d %6.1f %6.0f %s\n",
               sim.plan.name.c_str(), seed_text.c_str(), mode.c_str(), sn.n, sf.n, on.translation, on.rotation,
               sn.translation, sn.rotation, of.translation, of.rotation, sf.translation, sf.rotation,
-              r.summary.errors ? r.summary.errors->ate_rmse : -1.0, walls, slam_s, r.summary.data_seconds);
+              r.summary.errors ? r.summary.errors->ate_rmse : -1.0, walls, slam_s, r.summary.data_seconds,
+              loops.c_str());
           std::fflush(stdout);
         }
         std::fprintf(stderr, "  (%s seed %s: %.0f m route, %zu scans, generated in %.1f s)\n", sim.plan.name.c_str(),

@@ -18,6 +18,7 @@
 // run worse than without loop closing by more than 10 %), not those figures.
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
@@ -41,14 +42,16 @@ struct Outcome {
   double ate = 0.0;
 };
 
-fs::path building_with_gaps(const std::string& plan) {
+fs::path building_with_gaps(const std::string& plan, std::uint64_t seed) {
   sim_building::GeneratorSettings settings;
   settings.plan = plan;
+  settings.world_seed = settings.seed = seed;
   settings.laser.gap_probability = 0.003;
   settings.laser.gap_min = 40.0;
   settings.laser.gap_max = 80.0;
   const sim_building::Simulation sim = sim_building::simulate(settings);
-  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / (plan + "_1_gaps");
+  const fs::path dir =
+      fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / (plan + "_" + std::to_string(seed) + "_gaps");
   sim_building::write_data_set(sim, dir);
   return dir;
 }
@@ -73,8 +76,8 @@ Outcome run(const fs::path& dir, bool loop_closing) {
   return out;
 }
 
-void check(const std::string& plan, bool loop_expected) {
-  const fs::path dir = building_with_gaps(plan);
+void check(const std::string& plan, std::uint64_t seed, bool loop_expected) {
+  const fs::path dir = building_with_gaps(plan, seed);
   const Outcome without = run(dir, false);
   const Outcome with = run(dir, true);
   std::cout << plan << ": " << with.stats.loop_closures << " closures (" << with.stats.loop_merged
@@ -89,8 +92,14 @@ void check(const std::string& plan, bool loop_expected) {
   EXPECT_LT(with.ate, without.ate * 1.1);
 }
 
-TEST(LoopClosingRun, RingClosesItsLoopAfterALoggingGap) { check("ring", true); }
+TEST(LoopClosingRun, RingClosesItsLoopAfterALoggingGap) { check("ring", 1, true); }
 
-TEST(LoopClosingRun, SymmetricBuildingHasNoFalseClosure) { check("symmetric", false); }
+TEST(LoopClosingRun, SymmetricBuildingHasNoFalseClosure) { check("symmetric", 1, false); }
+
+// A building the thresholds were not chosen on, where a single search once
+// accepted two false closures (a 7.5 m shift along a corridor with doors at
+// a regular spacing; ATE 5.2 → 20 m): a placement must now be found again by
+// the next search, with local features the first did not pair.
+TEST(LoopClosingRun, LongLoopIsNotClosedByAChanceFit) { check("long_loop", 2, false); }
 
 }  // namespace
