@@ -181,7 +181,7 @@ void Slam::skip_data_steps() {
 }
 
 Eigen::MatrixXd Slam::state_covariance(const std::vector<int>& idx) const {
-  if (!localizing()) return checked_marginal(idx);
+  if (!localizing()) return estimator_->marginal(idx);
   // The robot's rows from the estimator, the map's from the loaded map; the
   // two are uncorrelated (see the top of this file).
   const int k = static_cast<int>(dofs_.size());
@@ -195,7 +195,7 @@ Eigen::MatrixXd Slam::state_covariance(const std::vector<int>& idx) const {
       at.push_back(i);
     }
   if (!robot.empty()) {
-    const Eigen::MatrixXd R = checked_marginal(robot);
+    const Eigen::MatrixXd R = estimator_->marginal(robot);
     for (std::size_t a = 0; a < at.size(); ++a)
       for (std::size_t b = 0; b < at.size(); ++b)
         P(at[a], at[b]) = R(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
