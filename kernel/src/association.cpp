@@ -607,7 +607,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   std::vector<int>& idx = scratch_idx_;
   // The two products of eq. 29 per pair, J_ηv C_v J_ηvᵀ and J_ηo M J_ηoᵀ,
   // are kept with their factors and recomputed only when a factor's bits
-  // changed: a J_ηo that depends on the feature alone (a pole's, a point's)
+  // changed: a J_ηo that depends on the feature alone (not on the measurement)
   // serves every measurement of the reading, and an extractor whose J_ηv is
   // the same for every feature (η = h − v: −I) makes one C_η per measurement.
   // Same inputs, same operations: the same numbers as computing them afresh.
