@@ -206,7 +206,7 @@ void Slam::close_loops(const DataStep& data) {
         ++stats_.loop_unconfirmed;
         log_->info("step ", step_, ": map matching's placement of ", match.best.pairs.size(),
                    " features differs from the previous search's by ", moved, " m, ",
-                   turned * 180.0 / std::numbers::pi, " deg: neither is taken");
+                   turned * 180.0 / std::numbers::pi, " deg: that one is dropped, this one waits for the next search");
       }
     }
     if (!(same && fresh)) {
