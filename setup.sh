@@ -20,6 +20,7 @@ PACKAGES=(
   libeigen3-dev libopencv-dev libboost-dev libboost-filesystem-dev
   libyaml-cpp-dev libspdlog-dev libcli11-dev libpng-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  python3-dev pybind11-dev python3-numpy
 )
 
 missing=()
@@ -35,7 +36,10 @@ if ((${#missing[@]})); then
 fi
 
 echo "== configuring ($BUILD_DIR)"
-cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=Release -DMSPACE_WERROR="${MSPACE_WERROR:-OFF}"
+# The Python module is built for Debian's python3 (the one python3-numpy is
+# installed for), whatever other python3 comes first on the PATH.
+cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=Release -DMSPACE_WERROR="${MSPACE_WERROR:-OFF}" \
+  -DPython3_EXECUTABLE=/usr/bin/python3
 echo "== building with $JOBS jobs"
 cmake --build "$BUILD_DIR" -j "$JOBS"
 

@@ -20,10 +20,10 @@
 #include "check.hpp"
 #include "checkpoint.hpp"
 #include "config.hpp"
-#include "default_config.hpp"
 #include "logging.hpp"
 #include "mspace/abi.hpp"
 #include "plugin_registry.hpp"
+#include "run_request.hpp"
 #include "runner.hpp"
 #include "slam.hpp"
 
@@ -48,11 +48,6 @@ void setup_registry(PluginRegistry& registry, const CommonOptions& o) {
   for (const auto& dir : o.plugin_dirs) registry.add_search_dir(dir);
   for (const auto& dir : PluginRegistry::default_search_dirs()) registry.add_search_dir(dir);
   for (const auto& file : o.plugin_files) registry.add_plugin_file(file);
-}
-
-RunConfig load(const std::string& file, PluginRegistry& registry, const std::vector<std::string>& overrides) {
-  if (file.empty()) return parse_config(default_config_text(), default_config_name(), registry, overrides);
-  return load_config(file, registry, overrides);
 }
 
 struct RunCommand {
@@ -100,51 +95,26 @@ int cmd_resume(const RunCommand& c, const CommonOptions& common) {
   return run_and_report(*slam, c.quiet);
 }
 
-/// --map DIR and --mode MODE over the YAML's map section (docs/maps.md).
-void apply_map_options(RunConfig& config, const RunCommand& c) {
-  if (!c.map.empty()) {
-    config.map.load = c.map;
-    // A map given on the command line alone is one to localize in.
-    if (c.mode.empty() && config.map.mode == MapConfig::Mode::Mapping) config.map.mode = MapConfig::Mode::Localize;
-  }
-  if (!c.mode.empty()) {
-    bool known = false;
-    for (auto mode : {MapConfig::Mode::Mapping, MapConfig::Mode::Localize, MapConfig::Mode::Extend})
-      if (c.mode == map_mode_name(mode)) {
-        config.map.mode = mode;
-        known = true;
-      }
-    if (!known) throw ConfigError("--mode: '" + c.mode + "' is not one of: mapping, localize, extend");
-  }
-  const std::string problem = map_config_problem(config.map);
-  if (!problem.empty()) throw ConfigError("--map / --mode: " + problem);
-}
-
 int cmd_run(const RunCommand& c, const CommonOptions& common) {
   if (!c.resume.empty()) return cmd_resume(c, common);
-  const std::string& file = c.file;
   PluginRegistry registry;
   setup_registry(registry, common);
-  RunConfig config = load(file, registry, c.sets);
-  for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
-  set_log_level(parse_log_level(common.log_level.empty() ? config.log_level : common.log_level));
-  if (!c.out.empty()) config.output.dir = c.out;
-  if (c.max_steps > 0) config.max_steps = c.max_steps;
-  if (c.checkpoint_every) config.checkpoint_every = *c.checkpoint_every;
-  if (c.seed) config.seed = *c.seed;
-  if (!c.estimator.empty()) override_estimator(config, c.estimator, registry);
-  apply_run_seed(config);
-  apply_map_options(config, c);
+  RunRequest request;
+  request.config_file = c.file;
+  request.sets = c.sets;
+  request.output_dir = c.out;
+  request.estimator = c.estimator;
+  request.map = c.map;
+  request.mode = c.mode;
+  request.log_level = common.log_level;
+  request.max_steps = c.max_steps;
+  request.seed = c.seed;
+  request.checkpoint_every = c.checkpoint_every;
+  const RunConfig config = resolve_run_request(request, registry);
   // One line of what runs; the whole resolved configuration at debug level
   // (or with `mspace config`).
-  std::string plugins = "source " + config.source.plugin + ", motion " + config.motion.plugin + ", estimator " +
-                        config.estimator.plugin + ", features";
-  for (const InstanceConfig& f : config.features) plugins += " " + f.instance + " (" + f.plugin + ")";
-  plugins += ", sensors";
-  for (const SensorConfig& s : config.sensors) plugins += " " + s.name + " (" + s.extractor.plugin + ")";
-  kernel_log().info("running ", file.empty() ? default_config_name() : file, ": ", plugins);
-  kernel_log().debug("configuration ", file.empty() ? default_config_name() : file, ":\n",
-                     effective_config_yaml(config));
+  kernel_log().info("running ", describe_run(config));
+  kernel_log().debug("configuration ", config.file.string(), ":\n", effective_config_yaml(config));
   Slam slam(config, registry);
   return run_and_report(slam, c.quiet);
 }
@@ -185,8 +155,11 @@ int cmd_plugins(const CommonOptions& common) {
 int cmd_config(const std::string& file, const std::vector<std::string>& sets, const CommonOptions& common) {
   PluginRegistry registry;
   setup_registry(registry, common);
-  RunConfig config = load(file, registry, sets);
-  apply_run_seed(config);
+  RunRequest request;
+  request.config_file = file;
+  request.sets = sets;
+  request.log_level = common.log_level;
+  const RunConfig config = resolve_run_request(request, registry);
   std::cout << effective_config_yaml(config);
   return 0;
 }

@@ -1,9 +1,12 @@
+#include "mspace/abi.hpp"
 #include "mspace/log.hpp"
 #include "mspace/plugin.hpp"
 
 #include <stdexcept>
 
 namespace mspace {
+
+const char* sdk_library_abi_tag() { return MSPACE_ABI_TAG; }
 
 const char* plugin_kind_name(PluginKind kind) {
   switch (kind) {

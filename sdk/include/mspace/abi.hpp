@@ -56,4 +56,9 @@
 namespace mspace {
 /// The ABI tag the calling code was compiled with.
 inline const char* sdk_abi_tag() { return MSPACE_ABI_TAG; }
+/// The ABI tag the SDK library loaded at run time was compiled with: code
+/// that links the library (the Python module, a host program) compares it
+/// with sdk_abi_tag() to fail clearly instead of corrupting memory after an
+/// upgrade of one but not the other.
+const char* sdk_library_abi_tag();
 }  // namespace mspace

@@ -1,0 +1,57 @@
+#include "run_request.hpp"
+
+#include "default_config.hpp"
+#include "logging.hpp"
+#include "plugin_registry.hpp"
+
+namespace mspace::kernel {
+namespace {
+
+/// The request's map and mode over the YAML's map section.
+void apply_map_request(RunConfig& config, const RunRequest& r) {
+  if (!r.map.empty()) {
+    config.map.load = r.map;
+    // A map given on the command line alone is one to localize in.
+    if (r.mode.empty() && config.map.mode == MapConfig::Mode::Mapping) config.map.mode = MapConfig::Mode::Localize;
+  }
+  if (!r.mode.empty()) {
+    bool known = false;
+    for (auto mode : {MapConfig::Mode::Mapping, MapConfig::Mode::Localize, MapConfig::Mode::Extend})
+      if (r.mode == map_mode_name(mode)) {
+        config.map.mode = mode;
+        known = true;
+      }
+    if (!known) throw ConfigError("--mode: '" + r.mode + "' is not one of: mapping, localize, extend");
+  }
+  const std::string problem = map_config_problem(config.map);
+  if (!problem.empty()) throw ConfigError("--map / --mode: " + problem);
+}
+
+}  // namespace
+
+RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
+  RunConfig config = r.config_file.empty()
+                         ? parse_config(default_config_text(), default_config_name(), registry, r.sets)
+                         : load_config(r.config_file, registry, r.sets);
+  for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
+  set_log_level(parse_log_level(r.log_level.empty() ? config.log_level : r.log_level));
+  if (!r.output_dir.empty()) config.output.dir = r.output_dir;
+  if (r.max_steps > 0) config.max_steps = r.max_steps;
+  if (r.checkpoint_every) config.checkpoint_every = *r.checkpoint_every;
+  if (r.seed) config.seed = *r.seed;
+  if (!r.estimator.empty()) override_estimator(config, r.estimator, registry);
+  apply_run_seed(config);
+  apply_map_request(config, r);
+  return config;
+}
+
+std::string describe_run(const RunConfig& config) {
+  std::string text = config.file.string() + ": source " + config.source.plugin + ", motion " +
+                     config.motion.plugin + ", estimator " + config.estimator.plugin + ", features";
+  for (const InstanceConfig& f : config.features) text += " " + f.instance + " (" + f.plugin + ")";
+  text += ", sensors";
+  for (const SensorConfig& s : config.sensors) text += " " + s.name + " (" + s.extractor.plugin + ")";
+  return text;
+}
+
+}  // namespace mspace::kernel
