@@ -43,13 +43,163 @@ std::vector<int> touched_blocks(const CoordLayout& layout, const Eigen::VectorXd
   return out;
 }
 
+// Matrices of at most MaxN rows and columns: with a compile-time bound (the
+// coordinates of every feature type shipped today number ≤ kSmallCoords)
+// Eigen keeps them on the stack, so the search's many small products and
+// factorisations allocate nothing; Eigen::Dynamic gives the unbounded types.
+constexpr int kSmallCoords = 6;
+template <int MaxN>
+using MatN = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, MaxN, MaxN>;
+template <int MaxN>
+using VecN = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, MaxN, 1>;
+template <int MaxN>
+using JacN = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, MaxN, 3>;
+
 /// n × n: R(θ) on the (x, y) rows of every point block, identity elsewhere.
-Eigen::MatrixXd block_rotation(const CoordLayout& layout, double theta) {
-  Eigen::MatrixXd Rn = Eigen::MatrixXd::Identity(layout.size(), layout.size());
+template <int MaxN>
+MatN<MaxN> block_rotation(const CoordLayout& layout, double theta) {
+  MatN<MaxN> Rn = MatN<MaxN>::Identity(layout.size(), layout.size());
   const Eigen::Matrix2d R = rotation(theta);
   for (int b = 0; b < layout.num_blocks(); ++b)
-    if (is_point(layout.kind(b))) Rn.block<2, 2>(layout.offset(b), layout.offset(b)) = R;
+    if (is_point(layout.kind(b))) Rn.template block<2, 2>(layout.offset(b), layout.offset(b)) = R;
   return Rn;
+}
+
+/// CoincidenceResidual with bounded sizes.
+template <int MaxN>
+struct Residual {
+  VecN<MaxN> r;
+  MatN<MaxN> N, S;
+  JacN<MaxN> J;
+};
+
+/// What of a pair's residual does not depend on the motion. Which of a's
+/// symmetry directions enter N does not (a rotation moves no direction onto
+/// another block); when none does, N is b's alone and so are Nᵀx_b and
+/// Nᵀ Σ_b N: computed once per pair instead of once per angle and iteration.
+template <int MaxN>
+struct PairBasis {
+  bool usable = false;       ///< same layout and something left to compare
+  bool fixed = false;        ///< N does not depend on the motion
+  std::vector<int> a_columns;  ///< a's directions that enter N (rotated by T)
+  MatN<MaxN> Nt;             ///< m × n, when fixed
+  VecN<MaxN> Nt_xb;          ///< Nᵀ x_b, when fixed
+  MatN<MaxN> S_b;            ///< Nᵀ Σ_b N + floor² I, when fixed
+};
+
+/// An orthonormal basis of the complement of the columns of F (n × k).
+template <int MaxN>
+MatN<MaxN> complement_basis(const MatN<MaxN>& F, Eigen::Index n) {
+  if (F.cols() == 0) return MatN<MaxN>::Identity(n, n);
+  Eigen::ColPivHouseholderQR<MatN<MaxN>> qr(F);
+  qr.setThreshold(1e-9);
+  const Eigen::Index rank = qr.rank();
+  MatN<MaxN> Q = qr.householderQ();
+  return Q.rightCols(n - rank);
+}
+
+/// The free directions of a pair at motion T: b's, then a's chosen columns
+/// rotated by T.
+template <int MaxN>
+MatN<MaxN> free_directions(const FeatureShape& a, const FeatureShape& b, const std::vector<int>& a_columns,
+                           double theta) {
+  const CoordLayout& layout = *b.layout;
+  const Eigen::Index n = layout.size();
+  MatN<MaxN> F(n, b.free.cols() + static_cast<Eigen::Index>(a_columns.size()));
+  F.leftCols(b.free.cols()) = b.free;
+  if (!a_columns.empty()) {
+    const MatN<MaxN> Ra = block_rotation<MaxN>(layout, theta);
+    for (std::size_t k = 0; k < a_columns.size(); ++k)
+      F.col(b.free.cols() + static_cast<Eigen::Index>(k)) = Ra * a.free.col(a_columns[k]);
+  }
+  return F;
+}
+
+template <int MaxN>
+PairBasis<MaxN> pair_basis(const FeatureShape& a, const FeatureShape& b, double floor_sigma) {
+  PairBasis<MaxN> p;
+  if (a.layout == nullptr || b.layout == nullptr || !(*a.layout == *b.layout)) return p;
+  const CoordLayout& layout = *b.layout;
+  const Eigen::Index n = layout.size();
+  // a's directions on blocks b keeps fixed (both on one block would let two
+  // crossing lines "coincide" at their intersection).
+  for (Eigen::Index c = 0; c < a.free.cols(); ++c) {
+    bool only_fixed_blocks = true;
+    for (int block : touched_blocks(layout, a.free.col(c)))
+      only_fixed_blocks = only_fixed_blocks && !touches(layout, b.free, block);
+    if (only_fixed_blocks) p.a_columns.push_back(static_cast<int>(c));
+  }
+  p.fixed = p.a_columns.empty();
+  if (!p.fixed) {
+    p.usable = true;  // decided per motion
+    return p;
+  }
+  const MatN<MaxN> N = complement_basis<MaxN>(free_directions<MaxN>(a, b, p.a_columns, 0.0), n);
+  if (N.cols() == 0) return p;
+  p.usable = true;
+  p.Nt = N.transpose();
+  p.Nt_xb = p.Nt * b.x;
+  p.S_b = floor_sigma * floor_sigma * MatN<MaxN>::Identity(N.cols(), N.cols());
+  if (b.cov.size() != 0) p.S_b += p.Nt * b.cov * N;
+  return p;
+}
+
+/// Never prunes (residual_at's default).
+struct KeepAll {
+  template <class R, class J>
+  bool operator()(const R&, const J&, double) const { return false; }
+};
+
+/// The pair's residual at motion T (see coincidence_residual). `prune(r, J,
+/// bound)` is asked once r and J are known, with an upper bound on trace(S)
+/// (N has orthonormal columns and R(θ) is orthogonal, so trace(Nᵀ R Σ_a Rᵀ N)
+/// ≤ trace(Σ_a)); when it says so, S is not formed and false is returned.
+template <int MaxN, class Prune = KeepAll>
+bool residual_at(const FeatureShape& a, const FeatureShape& b, const PairBasis<MaxN>& basis, const PlanarMotion& T,
+                 double floor_sigma, Residual<MaxN>& out, const Prune& prune = Prune{}) {
+  if (!basis.usable) return false;
+  const CoordLayout& layout = *b.layout;
+  const Eigen::Index n = layout.size();
+  const Eigen::Matrix2d R = rotation(T.theta);
+  VecN<MaxN> xa = a.x;  // T(x_a)
+  JacN<MaxN> D = JacN<MaxN>::Zero(n, 3);  // ∂T(x_a)/∂(θ, t_x, t_y)
+  for (int block = 0; block < layout.num_blocks(); ++block) {
+    if (!is_point(layout.kind(block))) continue;
+    const int o = layout.offset(block);
+    const Eigen::Vector2d arm = R * (a.x.segment<2>(o) - T.pivot);  // R(θ)(p − pivot)
+    xa.template segment<2>(o) = arm + T.pivot + T.t;
+    D(o, 0) = -arm.y();
+    D(o + 1, 0) = arm.x();
+    D(o, 1) = 1.0;
+    D(o + 1, 2) = 1.0;
+  }
+  const double trace_a = a.cov.size() != 0 ? a.cov.trace() : 0.0;
+  double trace_bound = 0.0;
+  if (basis.fixed) {
+    out.N = basis.Nt.transpose();
+    out.r.noalias() = basis.Nt * xa;
+    out.r -= basis.Nt_xb;
+    trace_bound = basis.S_b.trace() + trace_a;
+  } else {
+    out.N = complement_basis<MaxN>(free_directions<MaxN>(a, b, basis.a_columns, T.theta), n);
+    if (out.N.cols() == 0) return false;
+    out.r.noalias() = out.N.transpose() * (xa - b.x);
+    trace_bound = static_cast<double>(out.N.cols()) * floor_sigma * floor_sigma +
+                  (b.cov.size() != 0 ? b.cov.trace() : 0.0) + trace_a;
+  }
+  out.J.noalias() = out.N.transpose() * D;
+  if (prune(out.r, out.J, trace_bound)) return false;
+  if (basis.fixed) {
+    out.S = basis.S_b;
+  } else {
+    out.S = floor_sigma * floor_sigma * MatN<MaxN>::Identity(out.N.cols(), out.N.cols());
+    if (b.cov.size() != 0) out.S += out.N.transpose() * b.cov * out.N;
+  }
+  if (a.cov.size() != 0) {
+    const MatN<MaxN> NtRa = out.N.transpose() * block_rotation<MaxN>(layout, T.theta);
+    out.S += NtRa * a.cov * NtRa.transpose();
+  }
+  return true;
 }
 
 /// Centre of the point blocks' (x, y) and the largest distance from it.
@@ -92,7 +242,10 @@ class Chi2Table {
   std::map<int, double> cache_;
 };
 
-double mahalanobis2(const Eigen::VectorXd& r, const Eigen::MatrixXd& S) { return r.dot(S.ldlt().solve(r)); }
+template <int MaxN>
+double mahalanobis2(const VecN<MaxN>& r, const MatN<MaxN>& S) {
+  return r.dot(S.ldlt().solve(r));
+}
 
 struct Peak {
   int votes = 0;
@@ -115,7 +268,7 @@ Eigen::VectorXd PlanarMotion::apply(const CoordLayout& layout, const Eigen::Vect
 
 Eigen::MatrixXd PlanarMotion::rotate(const CoordLayout& layout, const Eigen::MatrixXd& directions) const {
   if (directions.cols() == 0) return directions;
-  return block_rotation(layout, theta) * directions;
+  return block_rotation<Eigen::Dynamic>(layout, theta) * directions;
 }
 
 PlanarMotion PlanarMotion::scaled(double fraction) const { return PlanarMotion{theta * fraction, t * fraction, pivot}; }
@@ -124,61 +277,23 @@ PlanarMotion PlanarMotion::scaled(double fraction) const { return PlanarMotion{t
 
 bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const PlanarMotion& T, double floor_sigma,
                           CoincidenceResidual& out) {
-  if (a.layout == nullptr || b.layout == nullptr || !(*a.layout == *b.layout)) return false;
-  const CoordLayout& layout = *b.layout;
-  const int n = layout.size();
-  const Eigen::VectorXd xa = T.apply(layout, a.x);
-
-  // Free directions: b's, then a's (rotated) on blocks b keeps fixed.
-  std::vector<Eigen::VectorXd> free;
-  for (Eigen::Index c = 0; c < b.free.cols(); ++c) free.emplace_back(b.free.col(c));
-  const Eigen::MatrixXd fa = T.rotate(layout, a.free);
-  for (Eigen::Index c = 0; c < fa.cols(); ++c) {
-    bool only_fixed_blocks = true;
-    for (int block : touched_blocks(layout, fa.col(c))) only_fixed_blocks = only_fixed_blocks && !touches(layout, b.free, block);
-    if (only_fixed_blocks) free.emplace_back(fa.col(c));
-  }
-  if (free.empty()) {
-    out.N = Eigen::MatrixXd::Identity(n, n);
-  } else {
-    Eigen::MatrixXd F(n, static_cast<Eigen::Index>(free.size()));
-    for (std::size_t c = 0; c < free.size(); ++c) F.col(static_cast<Eigen::Index>(c)) = free[c];
-    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(F);
-    qr.setThreshold(1e-9);
-    const Eigen::Index rank = qr.rank();
-    const Eigen::MatrixXd Q = qr.householderQ();
-    out.N = Q.rightCols(n - rank);
-  }
-  const Eigen::Index m = out.N.cols();
-  if (m == 0) return false;
-
-  out.r = out.N.transpose() * (xa - b.x);
-  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(n, 3);  // ∂T(x_a)/∂(θ, t_x, t_y)
-  for (int block = 0; block < layout.num_blocks(); ++block) {
-    if (!is_point(layout.kind(block))) continue;
-    const int o = layout.offset(block);
-    const Eigen::Vector2d arm = xa.segment<2>(o) - T.pivot - T.t;  // R(θ)(p − pivot)
-    D(o, 0) = -arm.y();
-    D(o + 1, 0) = arm.x();
-    D(o, 1) = 1.0;
-    D(o + 1, 2) = 1.0;
-  }
-  out.J = out.N.transpose() * D;
-
-  Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(n, n);
-  if (a.cov.size() != 0) {
-    const Eigen::MatrixXd Ra = block_rotation(layout, T.theta);
-    cov += Ra * a.cov * Ra.transpose();
-  }
-  if (b.cov.size() != 0) cov += b.cov;
-  out.S = out.N.transpose() * cov * out.N + floor_sigma * floor_sigma * Eigen::MatrixXd::Identity(m, m);
+  const PairBasis<Eigen::Dynamic> basis = pair_basis<Eigen::Dynamic>(a, b, floor_sigma);
+  Residual<Eigen::Dynamic> r;
+  if (!residual_at(a, b, basis, T, floor_sigma, r)) return false;
+  out.r = r.r;
+  out.N = r.N;
+  out.S = r.S;
+  out.J = r.J;
   return true;
 }
 
 // ---- The search ---------------------------------------------------------------
 
-MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
-                         const Eigen::Vector2d& pivot, const MapMatchOptions& options) {
+namespace {
+
+template <int MaxN>
+MapMatch search(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
+                const Eigen::Vector2d& pivot, const MapMatchOptions& options) {
   MapMatch result;
   // Hypotheses come from the enlarged window (rivals); the accepted one must
   // lie in the window itself.
@@ -206,6 +321,20 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
       if ((local_fp[i].centre - old_fp[j].centre).norm() <= reach) partners[i].push_back(static_cast<int>(j));
     }
   }
+  // Each candidate pair's motion-independent part, made when first needed.
+  std::vector<std::vector<PairBasis<MaxN>>> bases(local.size());
+  std::vector<std::vector<char>> based(local.size());
+  for (std::size_t i = 0; i < local.size(); ++i) {
+    bases[i].resize(partners[i].size());
+    based[i].assign(partners[i].size(), 0);
+  }
+  const auto basis = [&](std::size_t i, std::size_t k) -> const PairBasis<MaxN>& {
+    if (!based[i][k]) {
+      bases[i][k] = pair_basis<MaxN>(local[i], old[static_cast<std::size_t>(partners[i][k])], o.floor_sigma);
+      based[i][k] = 1;
+    }
+    return bases[i][k];
+  };
 
   // 1. Hough transform: for each angle, votes of the pairs for translations.
   const int half = static_cast<int>(std::ceil(o.max_translation / o.cell));
@@ -214,7 +343,7 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
   const int steps = static_cast<int>(std::ceil(o.max_rotation / o.rotation_step));
   const double half_step = 0.5 * o.rotation_step;
   std::vector<Peak> peaks;
-  CoincidenceResidual res;
+  Residual<MaxN> res;
   for (int k = -steps; k <= steps; ++k) {
     const double theta = k * o.rotation_step;
     std::fill(votes.begin(), votes.end(), 0);
@@ -239,14 +368,15 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
       // of half an angle step is the only rotation left to allow for).
       const Eigen::Vector2d turned = T0.apply(local_fp[i].centre);
       const double slack = o.max_translation + local_fp[i].radius + (local_fp[i].centre - pivot).norm() * half_step;
-      for (int j : partners[i]) {
-        const Footprint& fj = old_fp[static_cast<std::size_t>(j)];
+      for (std::size_t k = 0; k < partners[i].size(); ++k) {
+        const auto j = static_cast<std::size_t>(partners[i][k]);
+        const Footprint& fj = old_fp[j];
         if ((turned - fj.centre).norm() > slack + fj.radius) continue;
-        if (!coincidence_residual(local[i], old[static_cast<std::size_t>(j)], T0, o.floor_sigma, res)) continue;
+        if (!residual_at(local[i], old[j], basis(i, k), T0, o.floor_sigma, res)) continue;
         // The angle grid is coarse: its half step enters as uncertainty.
         res.S += half_step * half_step * res.J.col(0) * res.J.col(0).transpose();
-        const Eigen::MatrixXd M = res.J.rightCols(2);
-        const Eigen::LDLT<Eigen::MatrixXd> W(res.S);
+        const Eigen::Matrix<double, Eigen::Dynamic, 2, 0, MaxN, 2> M = res.J.rightCols(2);
+        const Eigen::LDLT<MatN<MaxN>> W(res.S);
         const Eigen::Matrix2d A = M.transpose() * W.solve(M);
         const Eigen::Vector2d g = M.transpose() * W.solve(res.r);
         const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(A);
@@ -256,13 +386,13 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
         const int voter = static_cast<int>(i);
         if (l1 > 1e-6 * l2) {  // both directions fixed: one translation
           const Eigen::Vector2d t = -A.ldlt().solve(g);
-          const Eigen::VectorXd e = res.r + M * t;
+          const VecN<MaxN> e = res.r + M * t;
           if (m > 2 && e.dot(W.solve(e)) > chi2(m - 2)) continue;
           if (t.norm() <= o.max_translation) vote(t, voter);
         } else {  // one direction free (a sliding end point): a line of translations
           const Eigen::Vector2d u = es.eigenvectors().col(1), v = es.eigenvectors().col(0);
           const Eigen::Vector2d t0 = -(u.dot(g) / l2) * u;
-          const Eigen::VectorXd e = res.r + M * t0;
+          const VecN<MaxN> e = res.r + M * t0;
           if (m > 1 && e.dot(W.solve(e)) > chi2(m - 1)) continue;
           if (t0.norm() > o.max_translation) continue;
           const double reach = std::sqrt(o.max_translation * o.max_translation - t0.squaredNorm());
@@ -303,22 +433,32 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
   // 2. Verification: pair one to one, refine the motion, test jointly.
   auto pair_up = [&](const PlanarMotion& T, bool coarse, MapMatchHypothesis& h, Eigen::Matrix3d& H,
                      Eigen::Vector3d& grad) {
-    std::vector<std::tuple<double, int, int>> gated;
-    std::vector<CoincidenceResidual> kept_res;
-    std::map<std::pair<int, int>, std::size_t> where;
+    // (d², local, old, which gated residual)
+    std::vector<std::tuple<double, int, int, std::size_t>> gated;
+    std::vector<Residual<MaxN>> kept_res;
+    Residual<MaxN> r;
     for (std::size_t i = 0; i < local.size(); ++i)
-      for (int j : partners[i]) {
-        CoincidenceResidual r;
-        if (!coincidence_residual(local[i], old[static_cast<std::size_t>(j)], T, o.floor_sigma, r)) continue;
+      for (std::size_t k = 0; k < partners[i].size(); ++k) {
+        const int j = partners[i][k];
+        // A pair the gate below must refuse is dropped before S is formed:
+        // d² = rᵀS⁻¹r ≥ |r|² / λ_max(S) ≥ |r|² / trace(S), so |r|² >
+        // χ²·trace(S) already decides it (an exact test, not a heuristic).
+        const auto hopeless = [&](const VecN<MaxN>& rr, const JacN<MaxN>& J, double trace_bound) {
+          if (coarse)
+            trace_bound += half_step * half_step * J.col(0).squaredNorm() +
+                           0.25 * o.cell * o.cell * J.rightCols(2).squaredNorm();
+          return rr.squaredNorm() > chi2(static_cast<int>(rr.size())) * trace_bound;
+        };
+        if (!residual_at(local[i], old[static_cast<std::size_t>(j)], basis(i, k), T, o.floor_sigma, r, hopeless))
+          continue;
         if (coarse) {
           r.S += half_step * half_step * r.J.col(0) * r.J.col(0).transpose();
           r.S += 0.25 * o.cell * o.cell * r.J.rightCols(2) * r.J.rightCols(2).transpose();
         }
-        const double d2 = mahalanobis2(r.r, r.S);
+        const double d2 = mahalanobis2<MaxN>(r.r, r.S);
         if (d2 > chi2(static_cast<int>(r.r.size()))) continue;
-        gated.emplace_back(d2, static_cast<int>(i), j);
-        where[{static_cast<int>(i), j}] = kept_res.size();
-        kept_res.push_back(std::move(r));
+        gated.emplace_back(d2, static_cast<int>(i), j, kept_res.size());
+        kept_res.push_back(r);
       }
     std::sort(gated.begin(), gated.end());
     std::vector<char> used_local(local.size(), 0), used_old(old.size(), 0);
@@ -327,16 +467,16 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
     int rows = 0;
     H.setZero();
     grad.setZero();
-    for (const auto& [d2, i, j] : gated) {
+    for (const auto& [d2, i, j, at] : gated) {
       if (used_local[static_cast<std::size_t>(i)] || used_old[static_cast<std::size_t>(j)]) continue;
       used_local[static_cast<std::size_t>(i)] = used_old[static_cast<std::size_t>(j)] = 1;
       h.pairs.emplace_back(i, j);
       h.d2 += d2;
-      const CoincidenceResidual& r = kept_res[where[{i, j}]];
-      rows += static_cast<int>(r.r.size());
-      const Eigen::LDLT<Eigen::MatrixXd> W(r.S);
-      H += r.J.transpose() * W.solve(r.J);
-      grad += r.J.transpose() * W.solve(r.r);
+      const Residual<MaxN>& g = kept_res[at];
+      rows += static_cast<int>(g.r.size());
+      const Eigen::LDLT<MatN<MaxN>> W(g.S);
+      H += g.J.transpose() * W.solve(g.J);
+      grad += g.J.transpose() * W.solve(g.r);
     }
     h.dof = rows - 3;
   };
@@ -428,6 +568,18 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
   }
   result.accepted = true;
   return result;
+}
+
+}  // namespace
+
+MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
+                         const Eigen::Vector2d& pivot, const MapMatchOptions& options) {
+  int largest = 0;
+  for (const auto* shapes : {&local, &old})
+    for (const FeatureShape& s : *shapes)
+      if (s.layout != nullptr) largest = std::max(largest, s.layout->size());
+  if (largest <= kSmallCoords) return search<kSmallCoords>(local, old, pivot, options);
+  return search<Eigen::Dynamic>(local, old, pivot, options);
 }
 
 }  // namespace mspace::kernel

@@ -144,9 +144,9 @@ int main(int argc, char** argv) {
   set_log_level(LogLevel::Warn);
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
-  std::printf("%-10s %4s %-12s %5s %5s | %-15s %-15s | %-15s %-15s | %6s %5s %6s %6s %s\n", "plan", "seed", "odometry",
+  std::printf("%-10s %4s %-12s %5s %5s | %-15s %-15s | %-15s %-15s | %6s %5s %6s %6s %s %s\n", "plan", "seed", "odometry",
               "short", "long", "odo short m/deg", "SLAM short", "odo long m/deg", "SLAM long", "ATE m", "walls",
-              "slam s", "data s", "loops");
+              "slam s", "data s", "loops", "search s");
   int worse = 0, runs = 0;
   try {
     for (const std::string& plan : split(plans)) {
@@ -206,11 +206,11 @@ int main(int argc, char** argv) {
           if (sf.translation > of.translation) ++worse;
           std::printf(
               "%-10s %4s %-12s %5zu %5zu | %6.3f / %5.2f  %6.3f / %5.2f  | %6.2f / %5.1f  %6.2f / %5.1f  | "
-              "%6.2f %5d %6.1f %6.0f %s\n",
+              "%6.2f %5d %6.1f %6.0f %s %.2f\n",
               sim.plan.name.c_str(), seed_text.c_str(), mode.c_str(), sn.n, sf.n, on.translation, on.rotation,
               sn.translation, sn.rotation, of.translation, of.rotation, sf.translation, sf.rotation,
               r.summary.errors ? r.summary.errors->ate_rmse : -1.0, walls, slam_s, r.summary.data_seconds,
-              loops.c_str());
+              loops.c_str(), st.seconds_loops);
           std::fflush(stdout);
         }
         std::fprintf(stderr, "  (%s seed %s: %.0f m route, %zu scans, generated in %.1f s)\n", sim.plan.name.c_str(),

@@ -10,10 +10,12 @@
 // the true relative pose; > 1 m or 5° is a false closure), so a false
 // closure shows as plainly as a missed one.
 //
-// Measured (smoother, this commit): ring 1: 1 closure (8 features merged),
-// 0 false, ATE 0.371 → 0.343 m; symmetric 1 (the deliberately symmetric plan):
-// 1 closure, 0 false, 4 refused as ambiguous, ATE 1.298 → 1.408 m (the closure
-// is right but the map around it was already bent). The assertions are the
+// Measured when these tests were written (smoother, before the confirmation
+// step): ring 1: 1 closure (8 features merged), 0 false, ATE 0.371 → 0.343 m;
+// symmetric 1 (the deliberately symmetric plan): 1 closure, 0 false, 4
+// refused as ambiguous, ATE 1.298 → 1.408 m. Re-measured 2026-11-25 with the
+// confirmation step: symmetric 1: 0 closures, 6 refused as ambiguous, ATE
+// 1.298 m either way; long_loop 2: 0 closures, 56 refused, ATE 5.242 m. The assertions are the
 // property (no false closure, at least one closure where the loop exists, no
 // run worse than without loop closing by more than 10 %), not those figures.
 #include <gtest/gtest.h>
@@ -101,5 +103,14 @@ TEST(LoopClosingRun, SymmetricBuildingHasNoFalseClosure) { check("symmetric", 1,
 // a regular spacing; ATE 5.2 → 20 m): a placement must now be found again by
 // the next search, with local features the first did not pair.
 TEST(LoopClosingRun, LongLoopIsNotClosedByAChanceFit) { check("long_loop", 2, false); }
+
+// A building the thresholds were not chosen on where map matching under the
+// smoother does close loops after gaps, so a wrong placement has a chance to
+// be taken: every closure is checked against the ground truth and one false
+// closure fails the test. Measured (2026-11-25): 3 closures (26 features
+// merged) in 136 searches, 2 refused as ambiguous, 0 of 3 false; ATE 1.613 m
+// without, 1.730 m with — right closures that leave the smoothed map slightly
+// worse (README, "The gap buildings under the smoother"), inside the 10 %.
+TEST(LoopClosingRun, LRingClosesAfterGapsWithoutAFalseClosure) { check("l_ring", 2, true); }
 
 }  // namespace
