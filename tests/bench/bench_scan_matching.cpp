@@ -132,17 +132,14 @@ void BM_Match1080OfficeFarSeed(benchmark::State& state) {
 }
 BENCHMARK(BM_Match1080OfficeFarSeed)->Unit(benchmark::kMicrosecond);
 
-void BM_Match1080OfficeLocalMap(benchmark::State& state) {
-  static const std::vector<Increment> data = increments(tl::office_floor(), 1080, 0.25, -135.0);
-  run_local_map(state, data);
+/// 1080 beams with the local map, in the office floor or the hall.
+void BM_Match1080LocalMap(benchmark::State& state, bool hall) {
+  static const std::vector<Increment> office_data = increments(tl::office_floor(), 1080, 0.25, -135.0);
+  static const std::vector<Increment> hall_data = increments(tl::hall(), 1080, 0.25, -135.0);
+  run_local_map(state, hall ? hall_data : office_data);
 }
-BENCHMARK(BM_Match1080OfficeLocalMap)->Unit(benchmark::kMicrosecond);
-
-void BM_Match1080HallLocalMap(benchmark::State& state) {
-  static const std::vector<Increment> data = increments(tl::hall(), 1080, 0.25, -135.0);
-  run_local_map(state, data);
-}
-BENCHMARK(BM_Match1080HallLocalMap)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_Match1080LocalMap, Office, false)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_Match1080LocalMap, Hall, true)->Unit(benchmark::kMicrosecond);
 
 void BM_Match181Office(benchmark::State& state) {
   static const std::vector<Increment> data = increments(tl::office_floor(), 181, 1.0, -90.0);
