@@ -21,6 +21,7 @@
 
 #include "building_log.hpp"
 #include "carmen_log.hpp"
+#include "logged_source.hpp"
 #include "logging.hpp"
 
 namespace {
@@ -73,15 +74,7 @@ int main(int argc, char** argv) {
       for (std::size_t k = 1; k < sim.scans.size(); ++k)
         gap[k] = sim.time(sim.scans[k].sample) - sim.time(sim.scans[k - 1].sample) > 20.0 * settings.laser.interval;
       auto errors = [&](const std::string& odometry, double gate, double factor, std::vector<std::size_t>* counts) {
-        PluginArgs a;
-        a.instance_name = "source";
-        a.params = Params::defaults(carmen_log::CarmenLogSource::param_specs());
-        a.params.set("file", (dir / "building.clf").string());
-        a.params.set("ground_truth", (dir / "ground_truth.tum").string());
-        a.params.set("odometry", odometry);
-        a.params.set("scan_match_max_range", 30.0);
-        a.params.set("scan_match_wheel_gate", gate);
-        a.params.set("scan_match_gap_factor", factor);
+        const PluginArgs a = test_logged::source_args(dir, odometry, gate, factor);
         const carmen_log::CarmenLogSource source(a);
         const auto& scans = source.contents().scans;
         std::vector<double> e;

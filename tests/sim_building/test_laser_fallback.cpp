@@ -19,6 +19,7 @@
 
 #include "building_log.hpp"
 #include "carmen_log.hpp"
+#include "logged_source.hpp"
 #include "logging.hpp"
 #include "mspace/params.hpp"
 
@@ -73,19 +74,11 @@ TEST_P(LoggedLaser, NoIncrementIsWorseThanTheWheelsAllowAndFallbacksAreCounted) 
   const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / ("logged_" + settings.plan);
   sim_building::write_data_set(sim, dir);
 
+  const Params defaults = Params::defaults(carmen_log::CarmenLogSource::param_specs());
+  const double gate = defaults.get_double("scan_match_wheel_gate");
   auto read = [&](const std::string& odometry, bool guard) {
-    PluginArgs a;
-    a.instance_name = "source";
-    a.params = Params::defaults(carmen_log::CarmenLogSource::param_specs());
-    a.params.set("file", (dir / "building.clf").string());
-    a.params.set("ground_truth", (dir / "ground_truth.tum").string());
-    a.params.set("odometry", odometry);
-    a.params.set("scan_match_max_range", 30.0);  // as config/intel_walls.yaml
-    if (!guard) {
-      a.params.set("scan_match_wheel_gate", 0.0);
-      a.params.set("scan_match_gap_factor", 0.0);
-    }
-    return carmen_log::CarmenLogSource(a);
+    return carmen_log::CarmenLogSource(test_logged::source_args(
+        dir, odometry, guard ? gate : 0.0, guard ? defaults.get_double("scan_match_gap_factor") : 0.0));
   };
   const carmen_log::CarmenLogSource wheels = read("wheel", true);
   const carmen_log::CarmenLogSource guarded = read("scan_matched", true);
@@ -122,7 +115,6 @@ TEST_P(LoggedLaser, NoIncrementIsWorseThanTheWheelsAllowAndFallbacksAreCounted) 
   // wheels' measured spread at the gate: |e_match| ≤ |e_wheel| + √gate s_xy √L.
   const sm::WheelCheckResult& check = guarded.wheel_check();
   const auto& scans = wheels.contents().scans;
-  const double gate = Params::defaults(carmen_log::CarmenLogSource::param_specs()).get_double("scan_match_wheel_gate");
   for (std::size_t k = 1; k <= n; ++k) {
     if (sources[k - 1] != sm::IncrementSource::matched) continue;
     const Eigen::Vector3d d = carmen_log::odometry_increment(scans[k - 1].odometry, scans[k].odometry);
