@@ -58,6 +58,13 @@ std::vector<Increment> increments(const tl::World& world, int beams, double reso
   return out;
 }
 
+/// Items per second and the shares of increments matched / found by the correlative search.
+void report(benchmark::State& state, int matched, int correlative) {
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()));
+  state.counters["matched_pc"] = 100.0 * matched / static_cast<double>(state.iterations());
+  state.counters["correlative_pc"] = 100.0 * correlative / static_cast<double>(state.iterations());
+}
+
 void run(benchmark::State& state, const std::vector<Increment>& data) {
   const sm::LaserOdometry odometry({0.22, 0.0, 0.0}, sm::MatchOptions{});
   std::size_t k = 0;
@@ -69,9 +76,7 @@ void run(benchmark::State& state, const std::vector<Increment>& data) {
     correlative += r.match.correlative ? 1 : 0;
     benchmark::DoNotOptimize(r.increment);
   }
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()));
-  state.counters["matched_pc"] = 100.0 * matched / static_cast<double>(state.iterations());
-  state.counters["correlative_pc"] = 100.0 * correlative / static_cast<double>(state.iterations());
+  report(state, matched, correlative);
 }
 
 /// The increments in driving order with carmen_log's local map (scan_match_local_map: 4,
@@ -107,9 +112,7 @@ void run_local_map(benchmark::State& state, const std::vector<Increment>& data) 
     correlative += r.match.correlative ? 1 : 0;
     benchmark::DoNotOptimize(r.increment);
   }
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()));
-  state.counters["matched_pc"] = 100.0 * matched / static_cast<double>(state.iterations());
-  state.counters["correlative_pc"] = 100.0 * correlative / static_cast<double>(state.iterations());
+  report(state, matched, correlative);
   state.counters["keys_mean"] = static_cast<double>(keys) / static_cast<double>(state.iterations());
 }
 
