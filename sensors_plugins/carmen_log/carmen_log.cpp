@@ -12,6 +12,7 @@
 #include "mspace/pose.hpp"
 #include "mspace/records.hpp"
 #include "scan_matcher.hpp"
+#include "wheel_check.hpp"
 
 namespace mspace::carmen_log {
 namespace {
@@ -139,56 +140,99 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   local_options.key_distance = params.get_double("scan_match_key_distance");
   scan_matching::LocalMap local_map(odometry, local_options);
   std::vector<double> residuals;
-  std::size_t kept_seed = 0, correlative = 0, disagreed = 0;
+  std::size_t correlative = 0, disagreed = 0;
   Eigen::Vector3d previous_increment = Eigen::Vector3d::Zero();  // robot motion from scan i − 2 to i − 1
-  std::vector<Pose2> matched(log_.scans.size());
-  covariances_.assign(log_.scans.size(), Eigen::Matrix3d::Zero());
+  const std::size_t n = log_.scans.size();
+  std::vector<Pose2> matched(n);
+  std::vector<Eigen::Vector3d> wheel(n, Eigen::Vector3d::Zero()), laser(n, Eigen::Vector3d::Zero());
+  std::vector<scan_matching::IncrementSource> source(n, scan_matching::IncrementSource::failed);
+  std::vector<double> times(n);
+  for (std::size_t i = 0; i < n; ++i) times[i] = log_.scans[i].t;
+  scan_matching::WheelCheckOptions check_options;
+  check_options.gate = params.get_double("scan_match_wheel_gate");
+  check_options.gap_factor = params.get_double("scan_match_gap_factor");
+  const std::vector<bool> gaps = scan_matching::logging_gaps(times, check_options.gap_factor);
+  covariances_.assign(n, Eigen::Matrix3d::Zero());
   matched[0] = log_.scans[0].odometry;
   auto points_of = [&](const Scan& s) { return scan_matching::scan_to_points(s.ranges, s.bearings, max_range); };
   local_map.add(0, points_of(log_.scans[0]), matched[0]);
-  for (std::size_t i = 1; i < log_.scans.size(); ++i) {
+  for (std::size_t i = 1; i < n; ++i) {
     const Scan& previous = log_.scans[i - 1];
     const Scan& current = log_.scans[i];
     const Eigen::Vector3d seed = odometry_increment(previous.odometry, current.odometry);
+    wheel[i] = laser[i] = seed;
+    if (gaps[i]) {  // scans too far apart in time: the wheels, and the local map starts again
+      source[i] = scan_matching::IncrementSource::gap;
+      previous_increment = seed;
+      matched[i] = apply_increment(matched[i - 1], seed);
+      local_map.clear();
+      local_map.add(i, points_of(current), matched[i]);
+      log.debug("scan ", i, " (", file_, ":", current.line, "): ", times[i] - times[i - 1],
+                " s after the previous scan (a logging gap): wheel odometry kept");
+      continue;
+    }
     // The previous scan as the reference; with scan_match_drop_moving, its
     // points that the scan before it did not see there (things that moved)
     // are dropped, the increment between the two being the one just matched.
     const scan_matching::ReferenceScan reference =
-        drop_moving && i >= 2 ? odometry.reference(points_of(previous), points_of(log_.scans[i - 2]), previous_increment)
-                              : scan_matching::ReferenceScan(points_of(previous), options);
+        drop_moving && i >= 2 && !gaps[i - 1]
+            ? odometry.reference(points_of(previous), points_of(log_.scans[i - 2]), previous_increment)
+            : scan_matching::ReferenceScan(points_of(previous), options);
     // With scan_match_local_map, the last key scans join the match (placed
     // by the laser odometry so far); a failed match breaks that chain.
     const scan_matching::ScanPoints current_points = points_of(current);
     const scan_matching::OdometryResult r =
         odometry.match(reference, current_points, seed, local_map.placed(i - 1, matched[i - 1]));
-    previous_increment = r.increment;
+    previous_increment = laser[i] = r.increment;
     matched[i] = apply_increment(matched[i - 1], r.increment);
     if (r.match.ok) local_map.add(i, current_points, matched[i]);
     else local_map.clear();
     disagreed += r.match.disagreed ? 1 : 0;
     if (r.match.ok) {
+      source[i] = scan_matching::IncrementSource::matched;
       residuals.push_back(r.match.rms);
       if (with_covariance) covariances_[i] = r.covariance;
       correlative += r.match.correlative ? 1 : 0;
     } else {
-      ++kept_seed;
       log.debug("scan ", i, " (", file_, ":", current.line, "): scan match failed (", r.match.pairs, " pairs of ",
                 r.match.overlap, " overlapping points, rms ", r.match.rms, " m); wheel odometry kept");
     }
   }
-  for (std::size_t i = 0; i < log_.scans.size(); ++i) log_.scans[i].odometry = matched[i];
+  // The wheels' veto (wheel_check.hpp): matches they contradict beyond
+  // their spread, as measured on this log, fall back to the wheels.
+  // Per increment from here: entry i − 1 is the increment to scan i.
+  wheel.erase(wheel.begin());
+  laser.erase(laser.begin());
+  source.erase(source.begin());
+  wheel_check_ = scan_matching::check_against_wheels(wheel, laser, source, check_options);
+  const scan_matching::WheelCheckResult& check = wheel_check_;
+  for (std::size_t i = 1; i < n; ++i) {
+    const bool kept = check.source[i - 1] == scan_matching::IncrementSource::matched;
+    if (!kept) covariances_[i].setZero();
+    if (check.source[i - 1] == scan_matching::IncrementSource::inconsistent)
+      log.debug("scan ", i, " (", file_, ":", log_.scans[i].line, "): scan match ", laser[i - 1].transpose(),
+                " contradicts the wheel odometry ", wheel[i - 1].transpose(), " (chi2 ", check.chi2[i - 1],
+                "): wheel odometry kept");
+    log_.scans[i].odometry = apply_increment(log_.scans[i - 1].odometry, kept ? laser[i - 1] : wheel[i - 1]);
+  }
   double median = 0.0;
   if (!residuals.empty()) {
     std::nth_element(residuals.begin(), residuals.begin() + static_cast<long>(residuals.size() / 2), residuals.end());
     median = residuals[residuals.size() / 2];
   }
-  log.info("laser odometry: ", residuals.size(), " of ", log_.scans.size() - 1,
-           " increments scan-matched (median residual ", median * 1000.0, " mm, ", correlative,
-           " after a correlative search, ", disagreed, " disagreed with the wheel odometry), ", kept_seed,
-           " kept the wheel odometry");
-  if (kept_seed * 20 > log_.scans.size())
-    log.warn("laser odometry: ", kept_seed, " of ", log_.scans.size() - 1,
-             " scan matches failed (more than 5 %): check no_return_range, laser_offset and scan_match_max_range");
+  using scan_matching::IncrementSource;
+  const std::size_t kept = check.count(IncrementSource::matched), failed = check.count(IncrementSource::failed),
+                    gap = check.count(IncrementSource::gap), inconsistent = check.count(IncrementSource::inconsistent);
+  log.info("laser odometry: ", kept, " of ", n - 1, " increments scan-matched (median residual ", median * 1000.0,
+           " mm, ", correlative, " after a correlative search, ", disagreed,
+           " replaced by a tight match from the wheels); the wheel odometry kept for ", failed, " failed matches, ",
+           gap, " increments across logging gaps and ", inconsistent,
+           " matches the wheels contradict (spread measured on this log: ", check.sigma_xy * 1000.0, " mm and ",
+           check.sigma_theta * 180.0 / std::numbers::pi, " deg per sqrt(m), gate chi2 ", check_options.gate, ")");
+  if ((failed + inconsistent) * 20 > n)
+    log.warn("laser odometry: ", failed + inconsistent, " of ", n - 1,
+             " increments fell back to the wheel odometry (more than 5 %): check no_return_range, laser_offset and "
+             "scan_match_max_range");
 }
 
 std::vector<ParamSpec> CarmenLogSource::param_specs() {
@@ -255,6 +299,15 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                  "hand each matched increment's covariance (from the match's information and residual, calibrated "
                  "to NEES 3 on simulated buildings) to the run in DataStep::odometry_covariance, where it replaces "
                  "the motion model's noise; false: the motion model's noise for every increment"),
+      param_double("scan_match_wheel_gate", 25.90,
+                   "chi2 bound (3 dof) on a match's difference from the wheel odometry, in units of the spread "
+                   "of that difference measured on the whole log (robust, per sqrt(m) of path): a match beyond "
+                   "it falls back to the wheels and is counted (25.90: 1e-5 for a Gaussian); 0: no check",
+                   0.0),
+      param_double("scan_match_gap_factor", 10.0,
+                   "an increment spanning more than this many times the log's median time between scans "
+                   "crosses a logging gap: not matched, the wheel odometry kept and counted; 0: no gap check",
+                   0.0),
       param_double("scan_match_free_space_margin", 0.0,
                    "points of the current scan that the previous or a key scan saw through, its beams ending more "
                    "than this (m) beyond them, are taken to be moving and left out of the match (0: off)",
@@ -339,6 +392,20 @@ bool CarmenLogSource::next(DataStep& step) {
 }  // namespace mspace::carmen_log
 
 namespace mspace::carmen_log {
+
+std::vector<std::pair<std::string, double>> CarmenLogSource::figures() const {
+  if (wheel_check_.source.empty()) return {};
+  using scan_matching::IncrementSource;
+  std::vector<std::pair<std::string, double>> out;
+  out.emplace_back("laser_odometry_increments", static_cast<double>(wheel_check_.source.size()));
+  for (const IncrementSource s :
+       {IncrementSource::matched, IncrementSource::failed, IncrementSource::gap, IncrementSource::inconsistent})
+    out.emplace_back(std::string("laser_odometry_") + scan_matching::to_string(s),
+                     static_cast<double>(wheel_check_.count(s)));
+  out.emplace_back("laser_odometry_wheel_spread_m_per_sqrt_m", wheel_check_.sigma_xy);
+  out.emplace_back("laser_odometry_wheel_spread_deg_per_sqrt_m", wheel_check_.sigma_theta * 180.0 / std::numbers::pi);
+  return out;
+}
 
 std::vector<RecordedMount> CarmenLogSource::recorded_mounts() const {
   if (!log_.laser.offset) return {};

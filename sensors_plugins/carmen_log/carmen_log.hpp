@@ -33,6 +33,7 @@
 #include "carmen_reader.hpp"
 #include "mspace/params.hpp"
 #include "mspace/source.hpp"
+#include "wheel_check.hpp"
 
 namespace mspace::carmen_log {
 
@@ -52,8 +53,19 @@ class CarmenLogSource final : public DataSource {
   const LogContents& contents() const { return log_; }
   /// The laser's offset on the log's recorded channel (ROBOTLASER1 poses or PARAM lines), if any.
   std::vector<RecordedMount> recorded_mounts() const override;
+  /// With `odometry: scan_matched`: the increments matched, and those that
+  /// kept the wheel odometry by reason (failed, gap, inconsistent), with the
+  /// wheels' spread measured (wheel_check.hpp); the same as the log's
+  /// "laser odometry:" line. (Not yet in summary.yaml: that needs a
+  /// DataSource hook in the SDK.)
+  std::vector<std::pair<std::string, double>> figures() const;
   /// The laser pose on the robot used for laser odometry (x, y, θ).
   const Eigen::Vector3d& laser_mount() const { return mount_; }
+  /// With `odometry: scan_matched`, per increment (entry k − 1: scan k − 1 to
+  /// k): where it came from (the match, or the wheels and why); else empty.
+  const std::vector<scan_matching::IncrementSource>& increment_sources() const { return wheel_check_.source; }
+  /// With `odometry: scan_matched`: the wheels' check of the matches (spread measured, χ² of each).
+  const scan_matching::WheelCheckResult& wheel_check() const { return wheel_check_; }
 
  private:
   void scan_match_odometry(const Params& params, Logger& log);
@@ -67,6 +79,7 @@ class CarmenLogSource final : public DataSource {
   std::size_t next_ = 0;
   Logger* log_out_ = nullptr;
   Eigen::Vector3d mount_ = Eigen::Vector3d::Zero();
+  scan_matching::WheelCheckResult wheel_check_;
   std::vector<Eigen::Matrix3d> covariances_;  ///< per scan: the laser odometry increment's covariance (0: none)
 };
 

@@ -58,6 +58,7 @@ std::vector<double> simulate_scan(const Simulation& sim, const RayCaster& caster
     if (std::isfinite(r)) {
       value = std::max(0.0, r + l.range_sigma * rng.normal());
       if (value >= l.max_range) value = l.no_return;  // noise carried it out of range
+      if (l.dropout_probability > 0.0 && rng.uniform() < l.dropout_probability) value = l.no_return;
     }
     if (l.error_code_probability > 0.0 && rng.uniform() < l.error_code_probability)
       value = l.no_return - 0.01 * static_cast<double>(1 + rng.index(3));  // a SICK error code

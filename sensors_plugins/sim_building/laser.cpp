@@ -87,6 +87,21 @@ const std::vector<Preset>& presets() {
          s.gap_probability = 0.03;
          return s;
        }},
+      {"robotlaser_logged",
+       "ROBOTLASER1 logged as on a real robot: 181 beams of 1° whose start alternates among 4 angles "
+       "0.25° apart, 12 % of the beams without return, SICK error codes, laser 0.22 m ahead, a scan every "
+       "0.6 s ± 50 % and 0.2 % chance per scan of a 1–4 minute gap",
+       [] {
+         LaserSpec s = make("robotlaser_logged", "robotlaser1", 181, 1.0, 50.0, 81.83, 0.22, 0.6);
+         s.interleave = 4;
+         s.interleave_step_deg = 0.25;
+         s.dropout_probability = 0.12;
+         s.interval_jitter = 0.5;
+         s.gap_probability = 0.002;
+         s.gap_min = 60.0;
+         s.gap_max = 240.0;
+         return s;
+       }},
   };
   return list;
 }
@@ -123,6 +138,7 @@ std::string LaserSpec::describe() const {
     << "\nresolution_deg = " << resolution_deg << "\nstart_deg = " << start_deg << "\ninterleave = " << interleave
     << "\ninterleave_step_deg = " << interleave_step_deg << "\nmax_range = " << max_range
     << "\nno_return = " << no_return << "\nerror_code_probability = " << error_code_probability
+    << "\ndropout_probability = " << dropout_probability
     << "\nrange_sigma = " << range_sigma << "\nmount_x = " << mount_x << "\nmount_y = " << mount_y
     << "\nmount_theta_deg = " << mount_theta_deg << "\ninterval = " << interval
     << "\ninterval_jitter = " << interval_jitter << "\ngap_probability = " << gap_probability
@@ -155,6 +171,7 @@ void set_laser_param(LaserSpec& s, const std::string& key_value) {
                                                   {"max_range", &s.max_range},
                                                   {"no_return", &s.no_return},
                                                   {"error_code_probability", &s.error_code_probability},
+                                                  {"dropout_probability", &s.dropout_probability},
                                                   {"range_sigma", &s.range_sigma},
                                                   {"mount_x", &s.mount_x},
                                                   {"mount_y", &s.mount_y},
@@ -199,6 +216,7 @@ void validate(const LaserSpec& s) {
                                           "): a real return must never read as the no-return code");
   require(s.error_code_probability >= 0.0 && s.error_code_probability <= 0.5,
           "error_code_probability must be in [0, 0.5]");
+  require(s.dropout_probability >= 0.0 && s.dropout_probability <= 0.9, "dropout_probability must be in [0, 0.9]");
   require(s.range_sigma >= 0.0 && s.range_sigma <= 1.0, "range_sigma must be in [0, 1] m");
   require(std::hypot(s.mount_x, s.mount_y) <= 0.5, "the laser must be mounted within 0.5 m of the robot centre");
   require(s.interval >= 0.01 && s.interval <= 10.0, "interval must be in [0.01, 10] s");

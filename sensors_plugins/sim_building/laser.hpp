@@ -9,7 +9,10 @@
 // N(0, range_sigma²); a beam that meets nothing within max_range reads
 // `no_return` (the code a real driver writes, 81.83 for CARMEN's SICK driver,
 // 50.0 for others), and with probability error_code_probability a beam reads
-// one of the SICK error codes just below it (no_return − 0.01·{1, 2, 3}).
+// one of the SICK error codes just below it (no_return − 0.01·{1, 2, 3}); with
+// probability dropout_probability a beam that hit something reads no_return
+// anyway (dark or glancing surfaces, glass: 12 % of the beams of a real
+// ROBOTLASER1 log).
 // Scans are logged every `interval` s (± interval_jitter·interval), and with
 // probability gap_probability per scan the log has a gap of gap_min..gap_max s.
 //
@@ -35,6 +38,7 @@ struct LaserSpec {
   double max_range = 50.0;   ///< m
   double no_return = 81.83;  ///< value written for a beam with no return (m)
   double error_code_probability = 0.001;
+  double dropout_probability = 0.0;  ///< a beam with a return reads no_return
   double range_sigma = 0.01;                                    ///< m
   double mount_x = 0.22, mount_y = 0.0, mount_theta_deg = 0.0;  ///< laser pose on the robot (m, deg)
   double interval = 0.2;                                        ///< s between scans

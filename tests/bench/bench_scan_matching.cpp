@@ -4,7 +4,10 @@
 // hall of tests/fixtures/laser_sim.hpp, logged every 0.6 s at 0.6 m/s and
 // 60°/s, seeded with noisy wheel odometry. One iteration = one increment:
 // preparing the reference scan (normals, noise) and matching, as the
-// carmen_log source does. Run e.g.
+// carmen_log source does; the *LocalMap variants also match against the last
+// key scans of a local map (4 keys 0.3 m apart, weight 0.3, free-space check
+// 0.15 m: the settings README.md gives for Intel) and add the scan to it,
+// increments taken in driving order. Run e.g.
 //   ./build/bin/bench_scan_matching --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
@@ -55,6 +58,13 @@ std::vector<Increment> increments(const tl::World& world, int beams, double reso
   return out;
 }
 
+/// Items per second and the shares of increments matched / found by the correlative search.
+void report(benchmark::State& state, int matched, int correlative) {
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()));
+  state.counters["matched_pc"] = 100.0 * matched / static_cast<double>(state.iterations());
+  state.counters["correlative_pc"] = 100.0 * correlative / static_cast<double>(state.iterations());
+}
+
 void run(benchmark::State& state, const std::vector<Increment>& data) {
   const sm::LaserOdometry odometry({0.22, 0.0, 0.0}, sm::MatchOptions{});
   std::size_t k = 0;
@@ -66,9 +76,44 @@ void run(benchmark::State& state, const std::vector<Increment>& data) {
     correlative += r.match.correlative ? 1 : 0;
     benchmark::DoNotOptimize(r.increment);
   }
-  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()));
-  state.counters["matched_pc"] = 100.0 * matched / static_cast<double>(state.iterations());
-  state.counters["correlative_pc"] = 100.0 * correlative / static_cast<double>(state.iterations());
+  report(state, matched, correlative);
+}
+
+/// The increments in driving order with carmen_log's local map (scan_match_local_map: 4,
+/// scan_match_key_distance: 0.3, scan_match_local_map_weight: 0.3, scan_match_free_space_margin: 0.15).
+void run_local_map(benchmark::State& state, const std::vector<Increment>& data) {
+  sm::MatchOptions options;
+  options.local_map_weight = 0.3;
+  options.free_space_margin = 0.15;
+  const sm::LaserOdometry odometry({0.22, 0.0, 0.0}, options);
+  sm::LocalMapOptions map_options;
+  map_options.scans = 4;
+  map_options.key_distance = 0.3;
+  sm::LocalMap local_map(odometry, map_options);
+  std::size_t k = 0;
+  Eigen::Vector3d pose = Eigen::Vector3d::Zero();
+  int matched = 0, correlative = 0;
+  std::int64_t keys = 0;
+  for (auto _ : state) {
+    const std::size_t i = k++ % data.size();
+    const Increment& inc = data[i];
+    if (i == 0) {  // back to the start of the drive: a new map
+      local_map.clear();
+      pose.setZero();
+      local_map.add(0, inc.previous, pose);
+    }
+    const sm::ReferenceScan reference(inc.previous, options);
+    const sm::OdometryResult r = odometry.match(reference, inc.current, inc.seed, local_map.placed(i, pose));
+    pose = sm::compose(pose, r.increment);
+    if (r.match.ok) local_map.add(i + 1, inc.current, pose);
+    else local_map.clear();
+    keys += static_cast<std::int64_t>(local_map.size());
+    matched += r.match.ok ? 1 : 0;
+    correlative += r.match.correlative ? 1 : 0;
+    benchmark::DoNotOptimize(r.increment);
+  }
+  report(state, matched, correlative);
+  state.counters["keys_mean"] = static_cast<double>(keys) / static_cast<double>(state.iterations());
 }
 
 void BM_Match1080Office(benchmark::State& state) {
@@ -89,6 +134,15 @@ void BM_Match1080OfficeFarSeed(benchmark::State& state) {
   run(state, data);
 }
 BENCHMARK(BM_Match1080OfficeFarSeed)->Unit(benchmark::kMicrosecond);
+
+/// 1080 beams with the local map, in the office floor or the hall.
+void BM_Match1080LocalMap(benchmark::State& state, bool hall) {
+  static const std::vector<Increment> office_data = increments(tl::office_floor(), 1080, 0.25, -135.0);
+  static const std::vector<Increment> hall_data = increments(tl::hall(), 1080, 0.25, -135.0);
+  run_local_map(state, hall ? hall_data : office_data);
+}
+BENCHMARK_CAPTURE(BM_Match1080LocalMap, Office, false)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_Match1080LocalMap, Hall, true)->Unit(benchmark::kMicrosecond);
 
 void BM_Match181Office(benchmark::State& state) {
   static const std::vector<Increment> data = increments(tl::office_floor(), 181, 1.0, -90.0);

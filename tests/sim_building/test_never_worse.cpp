@@ -14,6 +14,9 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <algorithm>
+#include <cmath>
+#include <optional>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -25,6 +28,8 @@
 #include "plugin_registry.hpp"
 #include "relations.hpp"
 #include "runner.hpp"
+#include "scan_matcher.hpp"
+#include "sensor_health.hpp"
 #include "slam.hpp"
 
 namespace {
@@ -52,23 +57,65 @@ std::vector<StampedPose> odometry_poses(const InstanceConfig& source) {
   return out;
 }
 
+/// Pose at time t (within 1e-4 s) as (x, y, θ); none otherwise.
+std::optional<Eigen::Vector3d> planar_at(const std::vector<StampedPose>& poses, double t) {
+  const auto it = std::lower_bound(poses.begin(), poses.end(), t - 1e-4,
+                                   [](const StampedPose& p, double v) { return p.t < v; });
+  if (it == poses.end() || std::abs(it->t - t) > 1e-4) return std::nullopt;
+  return Eigen::Vector3d(it->pose[kX], it->pose[kY], it->pose[kTheta]);
+}
+
+/// Why SLAM's short relations differ from its odometry's: per relation, the
+/// odometry's error e_o, SLAM's e_s, and the corrections c = SLAM's relative
+/// pose − the odometry's (what the updates between t1 and t2 added). Prints
+/// the RMS of each and the share of c that undoes e_o (−⟨c, e_o⟩ / ⟨e_o, e_o⟩).
+void explain_short(const std::vector<StampedPose>& odometry, const std::vector<StampedPose>& slam,
+                   const std::vector<Relation>& near) {
+  double oo = 0.0, ss = 0.0, cc = 0.0, co = 0.0;
+  std::size_t n = 0;
+  for (const Relation& r : near) {
+    const auto o1 = planar_at(odometry, r.t1), o2 = planar_at(odometry, r.t2);
+    const auto s1 = planar_at(slam, r.t1), s2 = planar_at(slam, r.t2);
+    if (!o1 || !o2 || !s1 || !s2) continue;
+    const Eigen::Vector2d truth(r.delta[kX], r.delta[kY]);
+    const Eigen::Vector2d o = scan_matching::compose(scan_matching::inverse(*o1), *o2).head<2>();
+    const Eigen::Vector2d s = scan_matching::compose(scan_matching::inverse(*s1), *s2).head<2>();
+    oo += (o - truth).squaredNorm();
+    ss += (s - truth).squaredNorm();
+    cc += (s - o).squaredNorm();
+    co += (s - o).dot(o - truth);
+    ++n;
+  }
+  if (n == 0) return;
+  const double k = 1.0 / static_cast<double>(n);
+  std::printf("  short relations (%zu), RMS translation: odometry %.4f m, SLAM %.4f m, corrections %.4f m; share of "
+              "the odometry's error the corrections undo %.2f\n",
+              n, std::sqrt(oo * k), std::sqrt(ss * k), std::sqrt(cc * k), -co / oo);
+}
+
+/// Generates the building of case `c` (shortest route) into the build tree
+/// and points MSPACE_SIM_BUILDING at it; returns its folder.
+fs::path generate(const Case& c) {
+  sim_building::GeneratorSettings settings;
+  settings.plan = c.plan;
+  settings.world_seed = settings.seed = c.seed;
+  settings.route.length_m = 0.0;
+  settings.laser = sim_building::laser_preset(c.laser);
+  const sim_building::Simulation sim = sim_building::simulate(settings);
+  EXPECT_GE(sim.plan.people.size(), 1u) << c.plan;
+  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" /
+                       (c.plan + "_" + c.laser + "_" + std::to_string(c.seed));
+  sim_building::write_data_set(sim, dir);
+  setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
+  return dir;
+}
+
 TEST_P(NeverWorse, SlamRelationsAreNoWorseThanTheLaserOdometry) {
   set_log_level(LogLevel::Warn);
   const Case c = GetParam();
   {
     const std::uint64_t seed = c.seed;
-    sim_building::GeneratorSettings settings;
-    settings.plan = c.plan;
-    settings.world_seed = settings.seed = seed;
-    settings.route.length_m = 0.0;
-    settings.laser = sim_building::laser_preset(c.laser);
-    const sim_building::Simulation sim = sim_building::simulate(settings);
-    ASSERT_GE(sim.plan.people.size(), 1u) << c.plan;
-    const fs::path dir =
-        fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / (c.plan + "_" + c.laser + "_" + std::to_string(seed));
-    sim_building::write_data_set(sim, dir);
-    setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
-
+    const fs::path dir = generate(c);
     PluginRegistry registry;
     registry.add_search_dir(MSPACE_PLUGIN_DIR);
     RunConfig config = load_config(fs::path(MSPACE_SOURCE_DIR) / "config" / "sim_building.yaml", registry);
@@ -93,6 +140,7 @@ TEST_P(NeverWorse, SlamRelationsAreNoWorseThanTheLaserOdometry) {
                 odo_near.translation.mean, odo_near.rotation_deg.mean, slam_near.translation.mean,
                 slam_near.rotation_deg.mean, slam_far.matched, odo_far.translation.mean, odo_far.rotation_deg.mean,
                 slam_far.translation.mean, slam_far.rotation_deg.mean);
+    explain_short(odometry, slam.trajectory(), near);
     ASSERT_GT(near.size(), 10u);
     ASSERT_GT(far.size(), 5u);
     ASSERT_EQ(slam_far.matched, far.size());
@@ -115,5 +163,61 @@ INSTANTIATE_TEST_SUITE_P(Buildings, NeverWorse,
                          [](const ::testing::TestParamInfo<Case>& info) {
                            return info.param.plan + "_" + info.param.laser + "_" + std::to_string(info.param.seed);
                          });
+
+// The run-time guard (kernel/src/sensor_health.hpp, on for every sensor) on
+// the laser's wall updates of a generated building: once with
+// config/sim_building.yaml's noise, once with the extractor's and the motion
+// model's σ set 100× smaller than that. With the config's noise no warning
+// (its NIS is 0.17 × the expectation: the noise is set larger than the data
+// shows). With the mis-set noise the NIS ratio rises (measured 1.23) and,
+// given the true pose, the per-kind report asks for a larger σ (× 2.03) —
+// but NO warning: the gate drops the innovations an overconfident filter
+// would see as large, and the walls' own covariance (not scaled by the
+// noise) keeps S up. This test pins what the guard does see; that it does
+// not warn on the laser is a limit (README, issue 18).
+TEST(SensorHealthOnALaser, AMisSetNoiseIsWarnedAboutAndTheRightOneIsNot) {
+  set_log_level(LogLevel::Error);
+  generate(Case{"ring", "sick181", 1});
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  std::vector<double> ratio, true_pose_scale;
+  for (const double scale : {1.0, 0.01}) {
+    RunConfig config = load_config(fs::path(MSPACE_SOURCE_DIR) / "config" / "sim_building.yaml", registry);
+    ASSERT_EQ(config.sensors.size(), 1u);
+    InstanceConfig& extractor = config.sensors[0].extractor;
+    for (const char* key : {"range_sigma", "distance_sigma_floor", "angle_sigma_floor_deg"})
+      extractor.params.set(key, scale * extractor.params.get_double(key));
+    for (const char* key :
+         {"xy_noise_per_m", "xy_noise_floor", "theta_noise_per_rad", "theta_noise_per_m", "theta_noise_floor"})
+      config.motion.params.set(key, scale * config.motion.params.get_double(key));
+    Slam slam(config, registry);
+    RunOptions options;
+    options.progress = false;
+    options.write_outputs = false;
+    run_to_end(slam, options);
+    const auto health = slam.sensor_health();
+    ASSERT_EQ(health.size(), 1u);
+    std::string warnings;
+    for (const std::string& w : health[0].warnings) warnings += w + "\n";
+    std::printf("noise x %.1f: %lld updates, NIS ratio %.2f, warnings: %s", scale,
+                static_cast<long long>(health[0].updates), health[0].nis_ratio,
+                warnings.empty() ? "none\n" : warnings.c_str());
+    for (const KindNisReport& k : health[0].kinds)
+      std::printf("  kind %s: NIS %.2fx, sigma x %.2f; with the true pose NIS %.2fx, sigma x %.2f\n", k.kind.c_str(),
+                  k.nis_ratio, k.sigma_scale, k.nis_ratio_true_pose, k.sigma_scale_true_pose);
+    ASSERT_GT(health[0].updates, 1000);
+    ASSERT_EQ(health[0].kinds.size(), 1u);
+    ratio.push_back(health[0].nis_ratio);
+    true_pose_scale.push_back(health[0].kinds[0].sigma_scale_true_pose);
+    if (scale == 1.0) {
+      EXPECT_EQ(warnings.find("overconfident"), std::string::npos) << warnings;
+      EXPECT_LT(health[0].nis_ratio, SensorHealth::kNisRatioHigh);
+    }
+  }
+  // The mis-set noise shows: a larger NIS, and a σ to be raised given the true pose.
+  EXPECT_GT(ratio[1], 3.0 * ratio[0]);
+  EXPECT_GT(true_pose_scale[1], 1.0);
+  EXPECT_LT(true_pose_scale[0], true_pose_scale[1]);
+}
 
 }  // namespace

@@ -1,0 +1,90 @@
+// wheel_check.hpp — laser odometry never trusted beyond what the wheels allow
+// (issue 18): every scan-matched increment is compared with the wheel
+// odometry's increment over the same scans, and one the wheels contradict
+// beyond their measured uncertainty, or one across a logging gap, falls back
+// to the wheel increment, flagged.
+//
+// A wrong scan match (two corridors that look alike, a person dragging the
+// match, scans minutes apart) can be off by metres while each match alone
+// looks fine (many pairs, small residual). The wheels drift, but over one
+// increment their error is small and grows with the path driven. So:
+//
+//  * Logging gap: an increment whose time span exceeds gap_factor × the
+//    log's median span between scans is not matched: the two scans were
+//    taken far apart, and relating them is loop closing, not odometry.
+//
+//  * Consistency: for increment i with wheel motion w_i and matched motion
+//    m_i (both (dx, dy, dθ) in the previous robot frame), the difference
+//    e_i = m_i − w_i (angle wrapped) is scaled by the increment's path
+//    proxy L_i = |w_i,xy| + ρ |w_i,θ| + L̄ (ρ = turn_length, metres per
+//    radian of turning in place; L̄ the median L over the log, so that a
+//    robot standing still keeps a tolerance): the wheel error's variance
+//    grows with the path (a random walk), σ_i² = s² L_i. The scales s_xy,
+//    s_θ are measured from the log itself, robustly, as the medians of the
+//    normalised differences over the matched increments:
+//      s_xy = median(|e_xy| / √L) / √(2 ln 2)   (median of a 2-D Rayleigh = σ √(2 ln 2))
+//      s_θ  = median(|e_θ| / √L) / 0.6745        (median of |N(0, σ²)| = 0.6745 σ)
+//    — the spread of wheel error and matcher error together, as this log
+//    has them (Intel's wheels: centimetres; a simulator's: millimetres). The
+//    median stays right with up to half of the matches wrong. Then
+//      χ²_i = |e_xy|² / (s_xy² L_i) + e_θ² / (s_θ² L_i)
+//    above `gate` (χ² with 3 degrees of freedom) marks the increment
+//    inconsistent. Floors keep s from vanishing on perfect simulated data:
+//    s_xy ≥ floor_xy / √L̄ and s_θ ≥ floor_θ / √L̄ (the matcher's own
+//    resolution over a median increment).
+//
+// The result says, per increment, what was kept and why; the caller replaces
+// the fallbacks' increments (and drops their covariance) and counts them.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <vector>
+
+namespace mspace::scan_matching {
+
+struct WheelCheckOptions {
+  /// χ² bound (3 dof) on a match's difference from the wheels in units of
+  /// their measured spread: 25.90 = 1e-5 beyond it for a Gaussian; wheel
+  /// slips are heavier-tailed, so a match the wheels contradict this much
+  /// is wrong far more often than the wheels are. 0: no consistency check.
+  double gate = 25.90;
+  /// An increment spanning more than this × the median span between scans
+  /// crosses a logging gap (0: no gap check).
+  double gap_factor = 10.0;
+  double turn_length = 1.0;  ///< m of path a radian of turn counts for (the path proxy L)
+  double floor_xy = 0.002;   ///< m: smallest translation spread over a median increment
+  double floor_theta = 0.001;  ///< rad: smallest heading spread over a median increment
+};
+
+enum class IncrementSource {
+  matched,       ///< the scan match was kept
+  failed,        ///< the matcher itself gave up (too few pairs, large residual): wheels
+  gap,           ///< across a logging gap: wheels, not matched
+  inconsistent,  ///< the wheels contradict the match beyond their spread: wheels
+};
+
+/// Name for logs and summaries ("matched", "failed", "gap", "inconsistent").
+const char* to_string(IncrementSource source);
+
+/// Which increments span a logging gap: `times` are the scan times; entry i
+/// (i ≥ 1) is for the increment from scan i − 1 to i (entry 0 false).
+std::vector<bool> logging_gaps(const std::vector<double>& times, double gap_factor);
+
+struct WheelCheckResult {
+  std::vector<IncrementSource> source;  ///< per increment, as given, failed/gap kept, inconsistent added
+  std::vector<double> chi2;             ///< per increment: χ² of its difference (0 for non-matched)
+  double sigma_xy = 0.0;     ///< s_xy (m/√m) measured
+  double sigma_theta = 0.0;  ///< s_θ (rad/√m) measured
+  double median_path = 0.0;  ///< L̄ (m)
+  std::size_t count(IncrementSource s) const;
+};
+
+/// Checks matched increments against the wheels (see the file comment).
+/// `wheel` and `matched` are robot increments, `source` says which of them
+/// were matched (entries that are not `matched` are passed through).
+WheelCheckResult check_against_wheels(const std::vector<Eigen::Vector3d>& wheel,
+                                      const std::vector<Eigen::Vector3d>& matched,
+                                      const std::vector<IncrementSource>& source, const WheelCheckOptions& options);
+
+}  // namespace mspace::scan_matching
