@@ -48,6 +48,7 @@
 #include "mspace/cekf_filter.hpp"
 #include "mspace/ekf_filter.hpp"
 #include "mspace/estimator.hpp"
+#include "variance_components.hpp"
 
 namespace mspace::smoother {
 
@@ -71,6 +72,14 @@ struct SmootherOptions {
   RunningFilter running_filter = RunningFilter::Cekf;
   int max_active = cekf::CekfFilter::kDefaultMaxActive;  ///< running_filter cekf
   int keep_steps = cekf::CekfFilter::kDefaultKeepSteps;  ///< running_filter cekf
+  /// Estimate the motion and observation factors' noise scales from the
+  /// residuals at each optimisation (variance components,
+  /// variance_components.hpp) and use them from then on, in the optimisation
+  /// and in the running filter.
+  bool noise_estimation = false;
+  int noise_iterations = 10;      ///< re-estimate / re-optimise rounds per optimisation, at most
+  double noise_tolerance = 0.02;  ///< … until every variance factor is within this of 1
+  int noise_probes = 32;          ///< random vectors of the trace estimate
 };
 
 /// What the last optimisation did (tests, logs).
@@ -81,6 +90,7 @@ struct OptimisationReport {
   int factors = 0;
   int variables = 0;          ///< tangent dimension
   int down_weighted = 0;      ///< observations beyond the loss scale at the end
+  int noise_rounds = 0;       ///< variance-component rounds (noise_estimation)
   double seconds = 0.0;
   double seconds_marginal = 0.0;  ///< of which the covariance recovery
 };
@@ -103,7 +113,7 @@ class Smoother final : public Estimator {
   /// Checkpoints: the running EKF (as `ekf` saves it) and the triggers'
   /// bookkeeping; the kernel saves the nonlinear problem beside it.
   bool has_state() const override { return true; }
-  int state_version() const override { return 1; }
+  int state_version() const override { return 2; }  // 2: + noise scales
   void save_state(StateWriter& out) const override;
   void restore_state(const StateReader& in, int version) override;
 
@@ -118,6 +128,9 @@ class Smoother final : public Estimator {
   int optimisations() const { return optimisations_; }
   int loop_triggers() const { return loop_triggers_; }
   const OptimisationReport& last_report() const { return report_; }
+  /// The multipliers of each factor kind's configured covariance in use
+  /// (by FactorKind; all 1 unless noise_estimation).
+  const KindScales& noise_scales() const { return scales_; }
   /// The running filter's whole covariance (tests, diagnostics).
   Eigen::MatrixXd covariance() const;
 
@@ -141,6 +154,7 @@ class Smoother final : public Estimator {
   int optimisations_ = 0;
   int loop_triggers_ = 0;
   OptimisationReport report_;
+  KindScales scales_ = {1.0, 1.0, 1.0, 1.0, 1.0};
 };
 
 }  // namespace mspace::smoother
