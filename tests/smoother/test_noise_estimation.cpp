@@ -19,9 +19,6 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
-#include <fstream>
-#include <sstream>
-#include <string>
 
 #include "config.hpp"
 #include "logging.hpp"
@@ -38,19 +35,6 @@ using namespace mspace::kernel;
 
 const std::filesystem::path kSimConfig = std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "sim_points.yaml";
 
-/// `key: value` replaced by `key: value × factor` in `yaml` after `section`
-/// (the first occurrence there).
-void scale_key(std::string& yaml, const std::string& section, const std::string& key, double factor) {
-  const std::size_t from = yaml.find(section);
-  ASSERT_NE(from, std::string::npos) << section;
-  const std::size_t at = yaml.find(key + ": ", from);
-  ASSERT_NE(at, std::string::npos) << key;
-  const std::size_t value_at = at + key.size() + 2;
-  const std::size_t end = yaml.find_first_of(" \n#", value_at);
-  const double value = std::stod(yaml.substr(value_at, end - value_at));
-  yaml.replace(value_at, end - value_at, std::to_string(value * factor));
-}
-
 class NoiseEstimation : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -62,19 +46,15 @@ class NoiseEstimation : public ::testing::Test {
   /// extractor, not the simulator's) multiplied by `sigma_factor`; returns
   /// the scales estimated on the final problem.
   smoother::KindScales estimated_scales(double sigma_factor) {
-    std::ifstream in(kSimConfig);
-    std::stringstream text;
-    text << in.rdbuf();
-    std::string yaml = text.str();
-    const std::string line = "estimator:\n  plugin: ekf\n";
-    const auto at = yaml.find(line);
-    EXPECT_NE(at, std::string::npos);
-    yaml.replace(at, line.size(), "estimator:\n  plugin: smoother\n");
+    RunConfig config = load_config(kSimConfig, registry_);
+    override_estimator(config, "smoother", registry_);
     for (const char* key : {"xy_noise_per_m", "xy_noise_floor", "theta_noise_per_rad", "theta_noise_per_m",
                             "theta_noise_floor"})
-      scale_key(yaml, "\nmotion:", key, sigma_factor);
-    for (const char* key : {"range_sigma", "bearing_sigma_deg"}) scale_key(yaml, "\nsensors:", key, sigma_factor);
-    const RunConfig config = parse_config(yaml, kSimConfig.string(), registry_);
+      config.motion.params.set(key, config.motion.params.get_double(key) * sigma_factor);
+    EXPECT_EQ(config.sensors.size(), 1u);
+    Params& extractor = config.sensors[0].extractor.params;
+    for (const char* key : {"range_sigma", "bearing_sigma_deg"})
+      extractor.set(key, extractor.get_double(key) * sigma_factor);
     Slam slam(config, registry_);
     RunOptions options;
     options.progress = false;
