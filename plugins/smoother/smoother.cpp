@@ -179,6 +179,18 @@ void estimate_noise_scales(NonlinearProblem& problem, const SmootherOptions& o, 
 
 }  // namespace
 
+KindScales optimise_with_noise_estimation(NonlinearProblem& problem, const SmootherOptions& options,
+                                          KindScales scales, Logger& log) {
+  OptimisationReport report;
+  Normal normal = build(problem, options, scales);
+  SpMat H = assemble(normal, problem.tangent_dim(), kDamping);
+  Ldlt ldlt;
+  ldlt.analyzePattern(H);
+  gauss_newton(problem, options, scales, normal, H, ldlt, report);
+  estimate_noise_scales(problem, options, scales, normal, H, ldlt, report, log);
+  return scales;
+}
+
 Smoother::Smoother(SmootherOptions options, Logger* log)
     : o_(options), log_(log != nullptr ? log : &null_logger()), filter_(make_filter()) {
   if (o_.period < 0 || o_.loop_gap < 1 || o_.max_iterations < 1 || !(o_.loss_scale > 0.0) || o_.growth < 0.0 ||

@@ -26,6 +26,10 @@
 //      Mahalanobis norm), solve H δ = −g with a sparse LDLᵀ (Eigen
 //      SimplicialLDLT, AMD ordering, symbolic analysis once per optimisation),
 //      retract everything through the problem (eq. 24 for features);
+//   1b. with `noise_estimation`, re-estimate the motion and observation
+//      kinds' noise scales from the residuals (variance_components.hpp) and
+//      re-optimise, a few rounds; the scales stay for the next optimisation
+//      and scale Q and C_η in the running filter;
 //   2. the running covariance is re-set to the marginal of the final
 //      information matrix H over the estimator's rows S = [0, dim()) (current
 //      pose and every M-space row), the earlier pose nodes P marginalised:
@@ -94,6 +98,13 @@ struct OptimisationReport {
   double seconds = 0.0;
   double seconds_marginal = 0.0;  ///< of which the covariance recovery
 };
+
+/// Gauss–Newton over `problem` followed by the iterated variance-component
+/// estimate of the motion and observation kinds (what optimise() does with
+/// noise_estimation, without the running filter), starting from `scales`;
+/// returns the estimated scales (the problem is left at the optimum).
+KindScales optimise_with_noise_estimation(NonlinearProblem& problem, const SmootherOptions& options,
+                                          KindScales scales, Logger& log);
 
 class Smoother final : public Estimator {
  public:
