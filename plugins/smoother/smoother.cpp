@@ -1,5 +1,6 @@
 // smoother.cpp — periodic robust Gauss–Newton over the kernel's problem (see smoother.hpp).
 #include "smoother.hpp"
+#include "variance_components.hpp"
 
 #include "mspace/state.hpp"
 
@@ -41,31 +42,27 @@ struct Normal {
   int down_weighted = 0;
 };
 
-Normal build(NonlinearProblem& problem, const SmootherOptions& o) {
+Normal build(NonlinearProblem& problem, const SmootherOptions& o, const KindScales& scales) {
   Normal out;
   const int n = problem.tangent_dim();
   out.g = Eigen::VectorXd::Zero(n);
-  FactorLinearization lin;
+  WhitenedFactor f;
   for (int i = 0; i < problem.num_factors(); ++i) {
-    if (!problem.linearize(i, lin) || lin.eta.size() == 0) continue;
-    const Eigen::LLT<Eigen::MatrixXd> llt(lin.C);
-    if (llt.info() != Eigen::Success)
-      throw std::runtime_error("smoother: factor " + std::to_string(i) +
-                               " has a covariance that is not positive definite");
-    const Eigen::VectorXd r = llt.matrixL().solve(lin.eta);  // whitened
-    const Eigen::MatrixXd J = llt.matrixL().solve(lin.J);
+    if (!whiten(problem, i, scales, f)) continue;
+    const Eigen::VectorXd& r = f.r;
+    const Eigen::MatrixXd& J = f.J;
     const double s = r.squaredNorm();
-    const auto [rho, w] = lin.robust ? robust(o.loss, o.loss_scale, s) : std::pair<double, double>{s, 1.0};
-    if (lin.robust && w < 1.0) ++out.down_weighted;
+    const auto [rho, w] = f.robust ? robust(o.loss, o.loss_scale, s) : std::pair<double, double>{s, 1.0};
+    if (f.robust && w < 1.0) ++out.down_weighted;
     out.cost += 0.5 * rho;
-    out.by_kind[static_cast<int>(lin.kind)] += 0.5 * rho;
+    out.by_kind[static_cast<int>(f.kind)] += 0.5 * rho;
     const Eigen::MatrixXd H = w * J.transpose() * J;
     const Eigen::VectorXd g = w * J.transpose() * r;
-    for (std::size_t a = 0; a < lin.idx.size(); ++a) {
-      out.g[lin.idx[a]] += g[static_cast<Eigen::Index>(a)];
-      for (std::size_t b = 0; b < lin.idx.size(); ++b)
-        if (lin.idx[b] <= lin.idx[a])  // lower triangle
-          out.triplets.emplace_back(lin.idx[a], lin.idx[b],
+    for (std::size_t a = 0; a < f.idx.size(); ++a) {
+      out.g[f.idx[a]] += g[static_cast<Eigen::Index>(a)];
+      for (std::size_t b = 0; b < f.idx.size(); ++b)
+        if (f.idx[b] <= f.idx[a])  // lower triangle
+          out.triplets.emplace_back(f.idx[a], f.idx[b],
                                     H(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b)));
     }
   }
@@ -101,17 +98,98 @@ Eigen::MatrixXd inverse_spd(const Eigen::MatrixXd& S) {
   return C.selfadjointView<Eigen::Lower>();
 }
 
+/// A tiny Levenberg term keeps H definite along directions no factor
+/// constrains yet (it changes nothing measurable elsewhere).
+constexpr double kDamping = 1e-9;
+
 SpMat assemble(const Normal& normal, int n, double damping) {
   SpMat H(n, n);
   H.setFromTriplets(normal.triplets.begin(), normal.triplets.end());
-  // A tiny Levenberg term keeps H definite along directions no factor
-  // constrains yet (it changes nothing measurable elsewhere).
   for (int i = 0; i < n; ++i) H.coeffRef(i, i) += damping;
   H.makeCompressed();
   return H;
 }
 
+using Ldlt = Eigen::SimplicialLDLT<SpMat, Eigen::Lower>;
+
+/// Gauss–Newton with step halving from the normal equations (`normal`, `H`)
+/// at the current values; leaves them at the final values.
+void gauss_newton(NonlinearProblem& problem, const SmootherOptions& o, const KindScales& scales, Normal& normal,
+                  SpMat& H, Ldlt& ldlt, OptimisationReport& report) {
+  const int n = problem.tangent_dim();
+  for (int it = 0; it < o.max_iterations; ++it) {
+    ldlt.factorize(H);
+    if (ldlt.info() != Eigen::Success)
+      throw std::runtime_error("smoother: the information matrix is not positive definite");
+    Eigen::VectorXd delta = -ldlt.solve(normal.g);
+    const double cost = normal.cost;
+    problem.retract(delta);
+    ++report.iterations;
+    Normal next = build(problem, o, scales);
+    // Step halving: Gauss–Newton overshoots far from the optimum; the
+    // retraction is not exactly invertible, so halve by moving back.
+    for (int halving = 0; halving < 4 && next.cost > cost * (1.0 + 1e-9); ++halving) {
+      delta *= 0.5;
+      problem.retract(-delta);
+      next = build(problem, o, scales);
+    }
+    normal = std::move(next);
+    H = assemble(normal, n, kDamping);
+    if (delta.lpNorm<Eigen::Infinity>() < o.tolerance || cost - normal.cost < o.cost_tolerance * cost) break;
+  }
+}
+
+/// The iterated variance-component estimate (variance_components.hpp): the
+/// motion and observation kinds' scales re-estimated at the optimum and the
+/// problem re-optimised with them, until every factor is within
+/// `noise_tolerance` of 1 or after `noise_iterations` rounds.
+void estimate_noise_scales(NonlinearProblem& problem, const SmootherOptions& o, KindScales& scales, Normal& normal,
+                           SpMat& H, Ldlt& ldlt, OptimisationReport& report, Logger& log) {
+  const int n = problem.tangent_dim();
+  // M = Pᵀ L⁻ᵀ D^-½ of P H Pᵀ = L D Lᵀ, so that H⁻¹ = M Mᵀ.
+  const auto half_solve = [&](const Eigen::MatrixXd& Z) -> Eigen::MatrixXd {
+    Eigen::MatrixXd X = ldlt.vectorD().cwiseSqrt().cwiseInverse().asDiagonal() * Z;
+    ldlt.matrixU().solveInPlace(X);
+    return ldlt.permutationPinv() * X;
+  };
+  const auto weight = [&](double s) { return robust(o.loss, o.loss_scale, s).second; };
+  for (int round = 0; round < o.noise_iterations; ++round) {
+    ldlt.factorize(H);
+    if (ldlt.info() != Eigen::Success)
+      throw std::runtime_error("smoother: the information matrix is not positive definite");
+    const auto components = variance_components(problem, scales, o.noise_probes, half_solve, weight);
+    bool moved = false;
+    for (int k = 0; k < kFactorKinds; ++k) {
+      if (!estimated_kind(static_cast<FactorKind>(k))) continue;
+      const double f = components[static_cast<std::size_t>(k)].factor();
+      scales[static_cast<std::size_t>(k)] *= f;
+      moved = moved || std::abs(f - 1.0) > o.noise_tolerance;
+      log.debug("noise round ", round, ": kind ", k, ": ",
+                  components[static_cast<std::size_t>(k)].rows, " rows, redundancy ",
+                  components[static_cast<std::size_t>(k)].redundancy(), ", variance factor ", f, " -> scale ",
+                  scales[static_cast<std::size_t>(k)]);
+    }
+    ++report.noise_rounds;
+    if (!moved) break;
+    normal = build(problem, o, scales);
+    H = assemble(normal, n, kDamping);
+    gauss_newton(problem, o, scales, normal, H, ldlt, report);
+  }
+}
+
 }  // namespace
+
+KindScales optimise_with_noise_estimation(NonlinearProblem& problem, const SmootherOptions& options,
+                                          KindScales scales, Logger& log) {
+  OptimisationReport report;
+  Normal normal = build(problem, options, scales);
+  SpMat H = assemble(normal, problem.tangent_dim(), kDamping);
+  Ldlt ldlt;
+  ldlt.analyzePattern(H);
+  gauss_newton(problem, options, scales, normal, H, ldlt, report);
+  estimate_noise_scales(problem, options, scales, normal, H, ldlt, report, log);
+  return scales;
+}
 
 Smoother::Smoother(SmootherOptions options, Logger* log)
     : o_(options), log_(log != nullptr ? log : &null_logger()), filter_(make_filter()) {
@@ -146,15 +224,32 @@ void Smoother::reset(const Eigen::MatrixXd& P_rr) {
   last_optimised_ = 0;
   last_seen_.assign(static_cast<std::size_t>(k_), 0);
   loop_ = false;
+  scales_.fill(1.0);
 }
 
-void Smoother::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) { running().predict(J_rr, Q); }
+// The running filter sees the noise scaled as the optimisation does.
+void Smoother::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {
+  const double scale = scales_[static_cast<int>(FactorKind::Motion)];
+  if (scale == 1.0) {
+    running().predict(J_rr, Q);
+  } else {
+    running().predict(J_rr, scale * Q);
+  }
+}
 
 Eigen::VectorXd Smoother::update(const std::vector<LinearizedObservation>& obs) {
   std::vector<int> robot(static_cast<std::size_t>(k_));
   for (int i = 0; i < k_; ++i) robot[static_cast<std::size_t>(i)] = i;
   const Eigen::MatrixXd C_rr = running().marginal(robot);
-  Eigen::VectorXd dx = running().update(obs);
+  const double scale = scales_[static_cast<int>(FactorKind::Observation)];
+  Eigen::VectorXd dx;
+  if (scale == 1.0) {
+    dx = running().update(obs);
+  } else {
+    std::vector<LinearizedObservation> scaled = obs;
+    for (LinearizedObservation& o : scaled) o.C_eta *= scale;
+    dx = running().update(scaled);
+  }
   // Loop trigger: a feature row no update touched for loop_gap pose nodes,
   // re-observed with a large robot correction.
   bool stale = false;
@@ -196,17 +291,28 @@ void Smoother::save_state(StateWriter& out) const {
       loop_closures_seen_, optimisations_, loop_triggers_;
   out.put("smoother", s);
   put_ints(out, "smoother_last_seen", last_seen_);
+  out.put("smoother_noise_scales", Eigen::Map<const Eigen::MatrixXd>(scales_.data(), 1, kFactorKinds));
 }
 
 void Smoother::restore_state(const StateReader& in, int version) {
   const std::string context = "smoother restore_state";
-  if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
+  if (version != 1 && version != 2)
+    throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1 and 2)");
   const Eigen::MatrixXd& s = get_state(in, "smoother", 1, 8, context);
   const std::vector<double> v(s.data(), s.data() + s.size());
   for (double x : v)
     if (!(x >= 0 && x <= 1e15) || x != std::floor(x))
       throw std::invalid_argument(context + ": saved counters are not non-negative integers");
   std::vector<std::int64_t> last_seen = get_ints<std::int64_t>(in, "smoother_last_seen", 0, 1e15, context);
+  KindScales scales = {1.0, 1.0, 1.0, 1.0, 1.0};  // version 1: before noise estimation
+  if (version >= 2) {
+    const Eigen::MatrixXd& saved = get_state(in, "smoother_noise_scales", 1, kFactorKinds, context);
+    for (int k = 0; k < kFactorKinds; ++k) {
+      if (!(saved(0, k) > 0.0) || !std::isfinite(saved(0, k)))
+        throw std::invalid_argument(context + ": saved noise scales must be positive");
+      scales[static_cast<std::size_t>(k)] = saved(0, k);
+    }
+  }
   // A fresh filter of the configured kind (each refuses the other's state).
   Filter filter = make_filter();
   Estimator& f = std::visit([](auto& x) -> Estimator& { return x; }, filter);
@@ -223,6 +329,7 @@ void Smoother::restore_state(const StateReader& in, int version) {
   optimisations_ = static_cast<int>(v[6]);
   loop_triggers_ = static_cast<int>(v[7]);
   last_seen_ = std::move(last_seen);
+  scales_ = scales;
 }
 
 bool Smoother::relinearize(NonlinearProblem& problem, bool end_of_data) {
@@ -257,38 +364,18 @@ void Smoother::optimise(NonlinearProblem& problem) {
   if (state != running().dim())
     throw std::logic_error("smoother: the problem has " + std::to_string(state) + " state rows, the filter " +
                            std::to_string(running().dim()));
-  constexpr double kDamping = 1e-9;
-
   report_ = {};
   report_.factors = problem.num_factors();
   report_.variables = n;
-  Normal normal = build(problem, o_);
+  Normal normal = build(problem, o_, scales_);
   report_.initial_cost = normal.cost;
   log_->debug("optimisation ", optimisations_ + 0, ": cost before by kind: prior ", normal.by_kind[0], ", motion ",
               normal.by_kind[1], ", observation ", normal.by_kind[2], ", linear ", normal.by_kind[3], ", coincidence ", normal.by_kind[4]);
   SpMat H = assemble(normal, n, kDamping);
   Eigen::SimplicialLDLT<SpMat, Eigen::Lower> ldlt;
   ldlt.analyzePattern(H);
-  for (int it = 0; it < o_.max_iterations; ++it) {
-    ldlt.factorize(H);
-    if (ldlt.info() != Eigen::Success)
-      throw std::runtime_error("smoother: the information matrix is not positive definite");
-    Eigen::VectorXd delta = -ldlt.solve(normal.g);
-    const double cost = normal.cost;
-    problem.retract(delta);
-    ++report_.iterations;
-    Normal next = build(problem, o_);
-    // Step halving: Gauss–Newton overshoots far from the optimum; the
-    // retraction is not exactly invertible, so halve by moving back.
-    for (int halving = 0; halving < 4 && next.cost > cost * (1.0 + 1e-9); ++halving) {
-      delta *= 0.5;
-      problem.retract(-delta);
-      next = build(problem, o_);
-    }
-    normal = std::move(next);
-    H = assemble(normal, n, kDamping);
-    if (delta.lpNorm<Eigen::Infinity>() < o_.tolerance || cost - normal.cost < o_.cost_tolerance * cost) break;
-  }
+  gauss_newton(problem, o_, scales_, normal, H, ldlt, report_);
+  if (o_.noise_estimation) estimate_noise_scales(problem, o_, scales_, normal, H, ldlt, report_, *log_);
   report_.final_cost = normal.cost;
   report_.down_weighted = normal.down_weighted;
 

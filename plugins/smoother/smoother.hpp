@@ -26,6 +26,10 @@
 //      Mahalanobis norm), solve H δ = −g with a sparse LDLᵀ (Eigen
 //      SimplicialLDLT, AMD ordering, symbolic analysis once per optimisation),
 //      retract everything through the problem (eq. 24 for features);
+//   1b. with `noise_estimation`, re-estimate the motion and observation
+//      kinds' noise scales from the residuals (variance_components.hpp) and
+//      re-optimise, a few rounds; the scales stay for the next optimisation
+//      and scale Q and C_η in the running filter;
 //   2. the running covariance is re-set to the marginal of the final
 //      information matrix H over the estimator's rows S = [0, dim()) (current
 //      pose and every M-space row), the earlier pose nodes P marginalised:
@@ -48,6 +52,7 @@
 #include "mspace/cekf_filter.hpp"
 #include "mspace/ekf_filter.hpp"
 #include "mspace/estimator.hpp"
+#include "variance_components.hpp"
 
 namespace mspace::smoother {
 
@@ -71,6 +76,14 @@ struct SmootherOptions {
   RunningFilter running_filter = RunningFilter::Cekf;
   int max_active = cekf::CekfFilter::kDefaultMaxActive;  ///< running_filter cekf
   int keep_steps = cekf::CekfFilter::kDefaultKeepSteps;  ///< running_filter cekf
+  /// Estimate the motion and observation factors' noise scales from the
+  /// residuals at each optimisation (variance components,
+  /// variance_components.hpp) and use them from then on, in the optimisation
+  /// and in the running filter.
+  bool noise_estimation = false;
+  int noise_iterations = 10;      ///< re-estimate / re-optimise rounds per optimisation, at most
+  double noise_tolerance = 0.02;  ///< … until every variance factor is within this of 1
+  int noise_probes = 32;          ///< random vectors of the trace estimate
 };
 
 /// What the last optimisation did (tests, logs).
@@ -81,9 +94,17 @@ struct OptimisationReport {
   int factors = 0;
   int variables = 0;          ///< tangent dimension
   int down_weighted = 0;      ///< observations beyond the loss scale at the end
+  int noise_rounds = 0;       ///< variance-component rounds (noise_estimation)
   double seconds = 0.0;
   double seconds_marginal = 0.0;  ///< of which the covariance recovery
 };
+
+/// Gauss–Newton over `problem` followed by the iterated variance-component
+/// estimate of the motion and observation kinds (what optimise() does with
+/// noise_estimation, without the running filter), starting from `scales`;
+/// returns the estimated scales (the problem is left at the optimum).
+KindScales optimise_with_noise_estimation(NonlinearProblem& problem, const SmootherOptions& options,
+                                          KindScales scales, Logger& log);
 
 class Smoother final : public Estimator {
  public:
@@ -103,7 +124,7 @@ class Smoother final : public Estimator {
   /// Checkpoints: the running EKF (as `ekf` saves it) and the triggers'
   /// bookkeeping; the kernel saves the nonlinear problem beside it.
   bool has_state() const override { return true; }
-  int state_version() const override { return 1; }
+  int state_version() const override { return 2; }  // 2: + noise scales
   void save_state(StateWriter& out) const override;
   void restore_state(const StateReader& in, int version) override;
 
@@ -118,6 +139,9 @@ class Smoother final : public Estimator {
   int optimisations() const { return optimisations_; }
   int loop_triggers() const { return loop_triggers_; }
   const OptimisationReport& last_report() const { return report_; }
+  /// The multipliers of each factor kind's configured covariance in use
+  /// (by FactorKind; all 1 unless noise_estimation).
+  const KindScales& noise_scales() const { return scales_; }
   /// The running filter's whole covariance (tests, diagnostics).
   Eigen::MatrixXd covariance() const;
 
@@ -141,6 +165,7 @@ class Smoother final : public Estimator {
   int optimisations_ = 0;
   int loop_triggers_ = 0;
   OptimisationReport report_;
+  KindScales scales_ = {1.0, 1.0, 1.0, 1.0, 1.0};
 };
 
 }  // namespace mspace::smoother

@@ -28,6 +28,10 @@ std::unique_ptr<mspace::PluginObject> make_smoother(const mspace::PluginArgs& ar
   o.running_filter = args.params.get_string("running_filter") == "ekf" ? RunningFilter::Ekf : RunningFilter::Cekf;
   o.max_active = static_cast<int>(args.params.get_int("max_active"));
   o.keep_steps = static_cast<int>(args.params.get_int("keep_steps"));
+  o.noise_estimation = args.params.get_string("noise_estimation") == "variance_components";
+  o.noise_iterations = static_cast<int>(args.params.get_int("noise_iterations"));
+  o.noise_tolerance = args.params.get_double("noise_tolerance");
+  o.noise_probes = static_cast<int>(args.params.get_int("noise_probes"));
   return std::make_unique<Smoother>(o, args.logger);
 }
 
@@ -77,6 +81,17 @@ mspace::PluginDescriptor describe() {
                         "running_filter cekf: rows touched within this many updates stay active (as the cekf "
                         "plugin's)",
                         0, 1'000'000),
+      mspace::param_string("noise_estimation", "none",
+                           "variance_components: estimate the motion and the observation factors' noise scales from "
+                           "the residuals at each optimisation (iterated variance-component estimation) and use them "
+                           "from then on; none: the configured noise as it is",
+                           {"none", "variance_components"}),
+      mspace::param_int("noise_iterations", def.noise_iterations,
+                        "variance_components: estimate / re-optimise rounds per optimisation, at most", 1, 1000),
+      mspace::param_double("noise_tolerance", def.noise_tolerance,
+                           "variance_components: stop when every variance factor is within this of 1", 0.0, 1.0),
+      mspace::param_int("noise_probes", def.noise_probes,
+                        "variance_components: random vectors of the redundancy (trace) estimate", 1, 10'000),
   };
   d.factory = &make_smoother;
   return d;

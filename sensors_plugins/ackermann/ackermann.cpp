@@ -80,6 +80,9 @@ std::vector<ParamSpec> AckermannModel::param_specs() {
       param_double("noise_period", 0.025,
                    "time step the sigmas refer to (s); other steps are scaled so noise grows linearly in time",
                    1e-6),
+      param_double("steering_offset_deg", 0.0,
+                   "added to every steering sample: the steering encoder's zero error (DEGREES, positive = left)", -10.0,
+                   10.0),
   };
 }
 
@@ -91,6 +94,7 @@ AckermannModel::AckermannModel(const PluginArgs& args) {
   config_.speed_sigma_rel = p.get_double("speed_sigma_rel");
   config_.steering_sigma = p.get_double("steering_sigma_deg") * kDegree;
   config_.noise_period = p.get_double("noise_period");
+  config_.steering_offset = p.get_double("steering_offset_deg") * kDegree;
 }
 
 std::vector<int> AckermannModel::estimated_dofs() const { return {kX, kY, kTheta}; }
@@ -101,7 +105,7 @@ MotionPrediction AckermannModel::predict(const Pose6& x_r, const Eigen::VectorXd
                                 std::to_string(x_d.size()) + " values");
   }
   if (dt < 0.0) throw std::invalid_argument("ackermann: negative time step " + std::to_string(dt) + " s");
-  const Eigen::Vector2d increment = x_d;
+  const Eigen::Vector2d increment(x_d[0], x_d[1] + config_.steering_offset);
   Eigen::Matrix3d J_rr;
   Eigen::Matrix<double, 3, 2> J_rd;
   MotionPrediction prediction;

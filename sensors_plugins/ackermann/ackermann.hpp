@@ -15,6 +15,11 @@
 // with this model gives exactly the laser-point kinematics of the data set's
 // README, whose `a` is the distance from the rear axle to the laser, L + a.
 //
+// Calibration: the steering encoder reads α − `steering_offset` (its zero is
+// off by that much; the model adds it back to every sample). For the Victoria
+// Park log it is measured from the odometry's disagreement with the motion the
+// trees show (README, "Victoria Park").
+//
 // Noise (the C_d of eq. 26): independent errors on v_e and α with
 //   σ_v = speed_sigma + speed_sigma_rel·|v_e|,  σ_α = steering_sigma,
 // stated for one dead-reckoning period `noise_period` (25 ms for the ACFR
@@ -38,6 +43,7 @@ struct AckermannConfig {
   double speed_sigma_rel = 0.0;  ///< fraction of |v_e|
   double steering_sigma = 0.01;  ///< rad per noise_period
   double noise_period = 0.025;   ///< s
+  double steering_offset = 0.0;  ///< rad, added to every steering sample
 };
 
 /// Speed of the rear-axle centre v_c for encoder speed v_e and steering α,
@@ -60,14 +66,14 @@ class AckermannModel final : public MotionModel {
   explicit AckermannModel(const PluginArgs& args);
 
   /// wheelbase, encoder_offset, speed_sigma, speed_sigma_rel,
-  /// steering_sigma_deg, noise_period.
+  /// steering_sigma_deg, noise_period, steering_offset_deg.
   static std::vector<ParamSpec> param_specs();
 
   /// {kX, kY, kTheta}.
   std::vector<int> estimated_dofs() const override;
   /// x_d = (v_e, α): 2.
   int increment_size() const override { return 2; }
-  /// x_d = (v_e, α); throws std::invalid_argument for another size or a
+  /// x_d = (v_e, α − steering_offset); throws std::invalid_argument for another size or a
   /// negative dt. dt = 0 (the first step) leaves the pose unchanged.
   MotionPrediction predict(const Pose6& x_r, const Eigen::VectorXd& x_d, double dt) const override;
 

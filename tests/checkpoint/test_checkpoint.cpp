@@ -283,6 +283,15 @@ TEST(Checkpoint, SimPointsSmoother) {
   expect_resume_equals_uninterrupted({"sim_points.yaml", "smoother", 1300, 3000, {}});
 }
 
+// With noise estimation the smoother's estimated noise scales are part of its
+// state (state version 2): a resumed run must go on with them, not with 1.
+TEST(Checkpoint, SimPointsSmootherWithNoiseEstimation) {
+  expect_resume_equals_uninterrupted({"sim_points.yaml", "smoother", 1300, 3000, [](RunConfig& c) {
+                                        c.estimator.params.set("noise_estimation",
+                                                               std::string("variance_components"));
+                                      }});
+}
+
 TEST(Checkpoint, IntelEkf) {
   if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
   expect_resume_equals_uninterrupted({"intel_walls.yaml", "ekf", 300, 600, {}});

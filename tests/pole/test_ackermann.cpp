@@ -47,6 +47,22 @@ TEST(Ackermann, EncoderOnTheLeftWheelRunsFastOnALeftTurn) {
   EXPECT_THROW(centre_speed(c, 1.0, std::atan(2.83 / 0.76)), std::invalid_argument);
 }
 
+TEST(Ackermann, SteeringOffsetIsAddedToEverySample) {
+  // The steering encoder's zero error: a sample α with offset δ moves the car
+  // as α + δ would without, Jacobians and noise included.
+  AckermannConfig with = acfr();
+  with.steering_offset = 0.3 * kPi / 180;
+  const AckermannModel offset_model(with), plain(acfr());
+  const Pose6 x = make_pose2d(1, 2, 0.4);
+  const MotionPrediction a = offset_model.predict(x, Eigen::Vector2d(3.0, 0.05), 0.2);
+  const MotionPrediction b = plain.predict(x, Eigen::Vector2d(3.0, 0.05 + with.steering_offset), 0.2);
+  EXPECT_EQ(a.pose, b.pose);
+  EXPECT_EQ(a.J_rr, b.J_rr);
+  EXPECT_EQ(a.J_rd, b.J_rd);
+  EXPECT_EQ(a.C_d, b.C_d);
+  EXPECT_GT(a.pose[kTheta], plain.predict(x, Eigen::Vector2d(3.0, 0.05), 0.2).pose[kTheta]);  // positive = left
+}
+
 // The README gives the motion of the laser point at (a, b) from the rear axle
 // with a = 3.78 m (= L + 0.95, see ackermann.hpp). Composing this model with
 // the mount must give the same velocity.

@@ -81,18 +81,26 @@ AteResult ate_at_point(const std::vector<StampedPose>& estimate, const std::vect
   return r;
 }
 
-TEST(VictoriaParkRun, TrajectoryMatchesGpsWithinTargets) {
-  const std::filesystem::path data = data_dir();
-  if (!std::filesystem::is_directory(data)) {
-    GTEST_SKIP() << "Victoria Park data set not found at " << data
-                 << " (set MSPACE_DATA to the folder holding victoria_park/)";
+/// config/victoria_park.yaml on the data set; skips when the data is absent.
+class VictoriaParkRun : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::filesystem::path data = data_dir();
+    if (!std::filesystem::is_directory(data)) {
+      GTEST_SKIP() << "Victoria Park data set not found at " << data
+                   << " (set MSPACE_DATA to the folder holding victoria_park/)";
+    }
+    set_log_level(LogLevel::Warn);
+    registry.add_search_dir(MSPACE_PLUGIN_DIR);
+    config = load_config(std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "victoria_park.yaml", registry);
+    config.source.params.set("data_dir", data.string());
+    ASSERT_EQ(config.sensors.size(), 1u);
   }
-  set_log_level(LogLevel::Warn);
   PluginRegistry registry;
-  registry.add_search_dir(MSPACE_PLUGIN_DIR);
-  RunConfig config = load_config(std::filesystem::path(MSPACE_SOURCE_DIR) / "config" / "victoria_park.yaml", registry);
-  config.source.params.set("data_dir", data.string());
-  ASSERT_EQ(config.sensors.size(), 1u);
+  RunConfig config;
+};
+
+TEST_F(VictoriaParkRun, TrajectoryMatchesGpsWithinTargets) {
   const Pose6 laser_mount = config.sensors[0].mount;
 
   const auto start = std::chrono::steady_clock::now();
@@ -120,6 +128,32 @@ TEST(VictoriaParkRun, TrajectoryMatchesGpsWithinTargets) {
   EXPECT_EQ(antenna.pairs, fixes.size());
   EXPECT_LE(antenna.rmse, kTargetRmse);
   EXPECT_LE(antenna.median, kTargetMedian);
+}
+
+// The same file under the smoother with noise estimation (variance
+// components, plugins/smoother/variance_components.hpp): `mspace run
+// config/victoria_park.yaml --set estimator.plugin=smoother --set
+// estimator.noise_estimation=variance_components`. Issue 10's targets, RMSE ≤
+// 2.0 m and median ≤ 1.0 m (measured 1.483 m and 0.907 m on 2026-11-25; the
+// noise settings are the config's, rescaled by the smoother from its own
+// residuals, none chosen against the GPS). The margin on the median is small
+// (0.09 m) and the result is not robust: README "Victoria Park" lists the
+// settings (±50 % of one σ, another iteration schedule) that land on the other
+// self-consistent noise level and give 2.1–2.3 m / 1.2–1.3 m.
+TEST_F(VictoriaParkRun, SmootherWithNoiseEstimationMeetsIssue10Targets) {
+  override_estimator(config, "smoother", registry);
+  config.estimator.params.set("noise_estimation", std::string("variance_components"));
+  const Pose6 laser_mount = config.sensors[0].mount;
+  Slam slam(config, registry);
+  RunOptions options;
+  options.progress = false;
+  options.write_outputs = false;
+  run_to_end(slam, options);
+  const AteResult antenna = ate_at_point(slam.trajectory(), slam.ground_truth(), laser_mount);
+  std::cout << "victoria_park, smoother + noise estimation: ATE RMSE " << antenna.rmse << " m, median "
+            << antenna.median << " m, max " << antenna.max << " m\n";
+  EXPECT_LE(antenna.rmse, 2.0);
+  EXPECT_LE(antenna.median, 1.0);
 }
 
 }  // namespace
