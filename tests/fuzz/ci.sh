@@ -36,16 +36,20 @@ kernel=("$build/lib/libmspace_kernel.a" -lspdlog -lfmt -lboost_filesystem -lyaml
         -lopencv_core -lpng -lz -ldl "${sdk[@]}")
 images=(-lyaml-cpp -lopencv_imgcodecs -lopencv_core "${sdk[@]}")
 
-# object SOURCE: compiles a file under test once (coverage, no libFuzzer main).
+# object SOURCE: compiles a file under test (coverage, no libFuzzer main) once per run of this script
+# and sets $obj to the object file.
+declare -A compiled
 object() {
-  local o="$out/obj/$(echo "$1" | tr / _).o"
-  [[ -f $o && $o -nt $src/$1 ]] || "$cxx" "${flags[@]}" -fsanitize=fuzzer-no-link -c "$src/$1" -o "$o"
-  echo "$o"
+  obj="$out/obj/$(echo "$1" | tr / _).o"
+  if [[ -z ${compiled[$1]:-} ]]; then
+    "$cxx" "${flags[@]}" -fsanitize=fuzzer-no-link -c "$src/$1" -o "$obj"
+    compiled[$1]=1
+  fi
 }
 # harness NAME SOURCES... -- LIBRARIES...
 harness() {
   local name=$1 objects=() ; shift
-  while [[ $1 != -- ]]; do objects+=("$(object "$1")"); shift; done
+  while [[ $1 != -- ]]; do object "$1"; objects+=("$obj"); shift; done
   shift
   "$cxx" "${flags[@]}" -fsanitize=fuzzer "$src/tests/fuzz/fuzz_$name.cpp" "${objects[@]}" "$@" -o "$out/fuzz_$name"
   names+=("$name")
