@@ -6,7 +6,9 @@
 #   ./setup.sh --no-run   install + build only
 #
 # Environment: BUILD_DIR (default: build), JOBS (default: nproc),
-# MSPACE_WERROR=ON to treat warnings as errors (CI does).
+# MSPACE_WERROR=ON to treat warnings as errors (CI does), MSPACE_FUZZ_TOOLS=ON to
+# also install clang and its sanitizer / libFuzzer runtime for the fuzz
+# harnesses (tests/fuzz/ci.sh; CI does).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")"
 
@@ -22,6 +24,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy
 )
+# The fuzz harnesses: clang, and libFuzzer / ASan / UBSan (only recommended by clang-14).
+[[ "${MSPACE_FUZZ_TOOLS:-OFF}" == ON ]] && PACKAGES+=(clang libclang-rt-14-dev zlib1g-dev)
 
 missing=()
 for p in "${PACKAGES[@]}"; do

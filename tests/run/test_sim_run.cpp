@@ -232,6 +232,34 @@ TEST_F(SimRun, InterruptionWritesTheOutputsOfTheStepsProcessed) {
   EXPECT_EQ(now.sa_handler, SIG_DFL);
 }
 
+// A second signal while the first is being honoured ends the process at once
+// with 128 + the signal (130 for SIGINT), writing nothing more: the run is in
+// a child process, both signals come after its step 100.
+TEST_F(SimRun, ASecondSignalEndsTheProcessAtOnce) {
+  const RunConfig c = config();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    Slam slam(c, registry_);
+    RunOptions options;
+    options.progress = false;
+    options.stop_on_signals = true;
+    options.after_step = [](std::size_t done) {
+      if (done != 100) return;
+      std::raise(SIGINT);  // the first is recorded: the run would stop after this step
+      std::raise(SIGINT);  // the second ends the process here
+    };
+    run_to_end(slam, options);
+    _exit(0);  // not reached when the second signal works
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGINT);
+  EXPECT_FALSE(std::filesystem::exists(out_ / "summary.yaml"));
+  EXPECT_FALSE(std::filesystem::exists(out_ / "trajectory.tum"));
+}
+
 // The same through the command line: `mspace run` on a long simulated run,
 // SIGTERM once it is running, exits with 143 and writes the outputs.
 TEST_F(SimRun, TheCommandLineExitsWith143OnSigtermAndWritesTheOutputs) {
