@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "mspace/dense_product.hpp"
 #include "mspace/estimator_support.hpp"
 
 namespace mspace::cekf {
@@ -160,7 +161,7 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
   }
 
   // eq. 32 on the compressed representation.
-  paa_.topLeftCorner(na_, na_).selfadjointView<Eigen::Lower>().rankUpdate(W, -1.0);
+  add_product(paa_.topLeftCorner(na_, na_), -1.0, W, W, ProductPart::lower);
   phi_.topLeftCorner(na_, n0_).noalias() -= W * V.transpose();
   psi_.topLeftCorner(n0_, n0_).selfadjointView<Eigen::Lower>().rankUpdate(V, 1.0);
   mirror_psi();
@@ -529,8 +530,9 @@ void CekfFilter::flush_if_needed() {
 // overwrite or drop them.
 void CekfFilter::refresh_passive_block() {
   const auto gt = gt_.topLeftCorner(ns_, n0_);
-  const Eigen::MatrixXd psi_g = psi_.topLeftCorner(n0_, n0_) * gt.transpose();
-  p0_.topLeftCorner(ns_, ns_).triangularView<Eigen::Lower>() -= gt * psi_g;
+  Eigen::MatrixXd gt_psi = Eigen::MatrixXd::Zero(ns_, n0_);  // Gᵀ Ψ = (Ψ G)ᵀ, Ψ symmetric
+  add_product(gt_psi, 1.0, gt, psi_.topLeftCorner(n0_, n0_));
+  add_product(p0_.topLeftCorner(ns_, ns_), -1.0, gt, gt_psi, ProductPart::lower);
 }
 
 // The rows of A into the store: P_AB = Φ G against every slot, then P_AA.
@@ -542,7 +544,8 @@ void CekfFilter::write_active_rows_into_store() {
     if (active_[u] >= 0) slot_of[static_cast<std::size_t>(active_[u])] = slot_[u];
   }
   if (n0_ > 0) {
-    const Eigen::MatrixXd pab = phi_.topLeftCorner(na_, n0_) * gt_.topLeftCorner(ns_, n0_).transpose();
+    Eigen::MatrixXd pab = Eigen::MatrixXd::Zero(na_, ns_);
+    add_product(pab, 1.0, phi_.topLeftCorner(na_, n0_), gt_.topLeftCorner(ns_, n0_));
     for (int a = 0; a < na_; ++a) {
       const int s = slot_of[static_cast<std::size_t>(a)];
       p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
