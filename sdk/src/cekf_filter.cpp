@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "mspace/dense_product.hpp"
 #include "mspace/estimator_support.hpp"
 
 namespace mspace::cekf {
@@ -85,7 +86,7 @@ void CekfFilter::reset(const Eigen::MatrixXd& P_rr) {
   paa_ = Eigen::MatrixXd::Zero(cap, cap);
   phi_ = Eigen::MatrixXd::Zero(cap, kInitialCapacity);
   psi_ = Eigen::MatrixXd::Zero(kInitialCapacity, kInitialCapacity);
-  gt_ = Eigen::MatrixXd::Zero(cap, kInitialCapacity);
+  g_ = Eigen::MatrixXd::Zero(kInitialCapacity, cap);
   p0_ = Eigen::MatrixXd::Zero(cap, cap);
   paa_.topLeftCorner(k_, k_).triangularView<Eigen::Lower>() = P_rr;
   if (constrained_) U_.reset(k_);
@@ -153,14 +154,14 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
   // eq. 31 (before Φ changes: δx_B uses the Φ of the prior).
   const Eigen::VectorXd dx_active = -W * whitened;
   const Eigen::VectorXd basis_step = V * whitened;
-  const Eigen::VectorXd dx_slots = -gt_.topLeftCorner(ns_, n0_) * basis_step;
+  const Eigen::VectorXd dx_slots = -(g_.topLeftCorner(n0_, ns_).transpose() * basis_step);
   for (int i = 0; i < n_; ++i) {
     const auto u = static_cast<std::size_t>(i);
     dx[i] = active_[u] >= 0 ? dx_active[active_[u]] : dx_slots[slot_[u]];
   }
 
   // eq. 32 on the compressed representation.
-  paa_.topLeftCorner(na_, na_).selfadjointView<Eigen::Lower>().rankUpdate(W, -1.0);
+  add_product(paa_.topLeftCorner(na_, na_), -1.0, W, W, ProductPart::lower);
   phi_.topLeftCorner(na_, n0_).noalias() -= W * V.transpose();
   psi_.topLeftCorner(n0_, n0_).selfadjointView<Eigen::Lower>().rankUpdate(V, 1.0);
   mirror_psi();
@@ -244,9 +245,9 @@ Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std:
   const Split c = symmetric ? Split() : split(cols);
   const Split& cs = symmetric ? r : c;
   const auto basis = Eigen::seqN(0, n0_);
-  const Eigen::MatrixXd g_rows = gt_(r.passive_slot, basis).transpose();  // G_i, n0 × |rows in B|
+  const Eigen::MatrixXd g_rows = g_(basis, r.passive_slot);  // G_i, n0 × |rows in B|
   const Eigen::MatrixXd g_other =
-      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(gt_(c.passive_slot, basis).transpose());
+      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(g_(basis, c.passive_slot));
   const Eigen::MatrixXd& g_cols = symmetric ? g_rows : g_other;
   // A handful of rows and columns: coefficient-wise products of copied rows
   // beat blocked products.
@@ -257,7 +258,10 @@ Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std:
   const Eigen::MatrixXd& ba = symmetric ? ab : ba_other;
   const Eigen::MatrixXd bb_other =
       symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(g_rows.transpose() * psi_times(g_cols));
-  const Eigen::MatrixXd& bb = symmetric ? passive_quadratic(r.passive_slot, g_rows) : bb_other;
+  // Symmetric: P⁰_JJ and G_Jᵀ Ψ G_J from the memo (P⁰ is far too large for
+  // the cache: its entries, read afresh for every query, cost more than the rest).
+  const MemoEntry* memo = symmetric ? &passive_memo(r.passive_slot, g_rows) : nullptr;
+  const Eigen::MatrixXd& bb = symmetric ? memo->quadratic : bb_other;
   for (std::size_t i = 0; i < r.active_at.size(); ++i) {
     for (std::size_t j = 0; j < cs.active_at.size(); ++j)
       out(r.active_at[i], cs.active_at[j]) = paa(r.active_pos[i], cs.active_pos[j]);
@@ -269,7 +273,9 @@ Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std:
       out(r.passive_at[i], cs.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
     for (std::size_t j = 0; j < cs.passive_at.size(); ++j)
       out(r.passive_at[i], cs.passive_at[j]) =
-          p0(r.passive_slot[i], cs.passive_slot[j]) - bb(static_cast<Index>(i), static_cast<Index>(j));
+          (memo != nullptr ? memo->p0_block(static_cast<Index>(i), static_cast<Index>(j))
+                           : p0(r.passive_slot[i], cs.passive_slot[j])) -
+          bb(static_cast<Index>(i), static_cast<Index>(j));
   }
   return out;
 }
@@ -391,7 +397,7 @@ void CekfFilter::activate(const std::vector<int>& rows) {
   std::vector<int> slots;
   for (int i : passive) slots.push_back(slot_[static_cast<std::size_t>(i)]);
 
-  const Eigen::MatrixXd g = gt_(slots, Eigen::seqN(0, n0_)).transpose();
+  const Eigen::MatrixXd g = g_(Eigen::seqN(0, n0_), slots);
   const Eigen::MatrixXd psi_g = psi_times(g);
   const Eigen::MatrixXd P_JA = (phi_.topLeftCorner(na_, n0_) * g).transpose();
   Eigen::MatrixXd P_JJ = -g.transpose() * psi_g;
@@ -409,7 +415,7 @@ void CekfFilter::activate(const std::vector<int>& rows) {
   phi_.block(na_, n0_, t, t).setIdentity();
   psi_.block(n0_, 0, t, n0_ + t).setZero();
   psi_.block(0, n0_, n0_, t).setZero();
-  for (int c = 0; c < t; ++c) p0_column(slots[static_cast<std::size_t>(c)], gt_.col(n0_ + c).head(ns_));
+  for (int c = 0; c < t; ++c) p0_column(slots[static_cast<std::size_t>(c)], g_.row(n0_ + c).head(ns_).transpose());
   for (int c = 0; c < t; ++c) active_[static_cast<std::size_t>(passive[static_cast<std::size_t>(c)])] = na_ + c;
   na_ += t;
   n0_ += t;
@@ -417,11 +423,22 @@ void CekfFilter::activate(const std::vector<int>& rows) {
 
 // ---------------------------------------------------------------- memo
 
-const Eigen::MatrixXd& CekfFilter::passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const {
+const CekfFilter::MemoEntry& CekfFilter::passive_memo(const std::vector<int>& slots, const Eigen::MatrixXd& g) const {
   auto [entry, added] = memo_.try_emplace(slots);
-  if (added) entry->second.quadratic = g.transpose() * psi_times(g);
+  if (added) {
+    entry->second.quadratic = g.transpose() * psi_times(g);
+    entry->second.p0_block = p0_block(slots);
+  }
   entry->second.asked = true;
-  return entry->second.quadratic;
+  return entry->second;
+}
+
+Eigen::MatrixXd CekfFilter::p0_block(const std::vector<int>& slots) const {
+  const auto t = static_cast<Index>(slots.size());
+  Eigen::MatrixXd out(t, t);
+  for (Index j = 0; j < t; ++j)
+    for (Index i = 0; i < t; ++i) out(i, j) = p0(slots[static_cast<std::size_t>(i)], slots[static_cast<std::size_t>(j)]);
+  return out;
 }
 
 // Ψ ← Ψ + V Vᵀ adds (Vᵀ G_J)ᵀ (Vᵀ G_J) to G_Jᵀ Ψ G_J: O(m n0) per column
@@ -432,7 +449,7 @@ void CekfFilter::refresh_memo(const Eigen::MatrixXd& V) {
   std::erase_if(memo_, [](const auto& entry) { return !entry.second.asked; });
   std::vector<int> all_slots;
   for (const auto& [slots, entry] : memo_) all_slots.insert(all_slots.end(), slots.begin(), slots.end());
-  const Eigen::MatrixXd VtG = V.transpose() * gt_(all_slots, Eigen::seqN(0, n0_)).transpose();
+  const Eigen::MatrixXd VtG = V.transpose() * g_(Eigen::seqN(0, n0_), all_slots);
   Index column = 0;
   for (auto& [slots, entry] : memo_) {
     const auto size = static_cast<Index>(slots.size());
@@ -528,9 +545,10 @@ void CekfFilter::flush_if_needed() {
 // Entries of active or dead slots come out meaningless; the next steps
 // overwrite or drop them.
 void CekfFilter::refresh_passive_block() {
-  const auto gt = gt_.topLeftCorner(ns_, n0_);
-  const Eigen::MatrixXd psi_g = psi_.topLeftCorner(n0_, n0_) * gt.transpose();
-  p0_.topLeftCorner(ns_, ns_).triangularView<Eigen::Lower>() -= gt * psi_g;
+  const Eigen::MatrixXd gt = g_.topLeftCorner(n0_, ns_).transpose();
+  Eigen::MatrixXd gt_psi = Eigen::MatrixXd::Zero(ns_, n0_);  // Gᵀ Ψ = (Ψ G)ᵀ, Ψ symmetric
+  add_product(gt_psi, 1.0, gt, psi_.topLeftCorner(n0_, n0_));
+  add_product(p0_.topLeftCorner(ns_, ns_), -1.0, gt, gt_psi, ProductPart::lower);
 }
 
 // The rows of A into the store: P_AB = Φ G against every slot, then P_AA.
@@ -542,7 +560,8 @@ void CekfFilter::write_active_rows_into_store() {
     if (active_[u] >= 0) slot_of[static_cast<std::size_t>(active_[u])] = slot_[u];
   }
   if (n0_ > 0) {
-    const Eigen::MatrixXd pab = phi_.topLeftCorner(na_, n0_) * gt_.topLeftCorner(ns_, n0_).transpose();
+    Eigen::MatrixXd pab = Eigen::MatrixXd::Zero(na_, ns_);
+    add_product(pab, 1.0, phi_.topLeftCorner(na_, n0_), g_.topLeftCorner(n0_, ns_).transpose());
     for (int a = 0; a < na_; ++a) {
       const int s = slot_of[static_cast<std::size_t>(a)];
       p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
@@ -613,7 +632,7 @@ void CekfFilter::repartition(const std::vector<int>& active_rows) {
   for (int b = 0; b < na; ++b) {
     for (int a = b; a < na; ++a)
       paa_(a, b) = p0(slots[static_cast<std::size_t>(a)], slots[static_cast<std::size_t>(b)]);
-    if (n0 > 0) p0_column(slots[static_cast<std::size_t>(b)], gt_.col(b).head(ns_));
+    if (n0 > 0) p0_column(slots[static_cast<std::size_t>(b)], g_.row(b).head(ns_).transpose());
   }
   phi_.topLeftCorner(na, n0).setIdentity();
   psi_.topLeftCorner(n0, n0).setZero();
@@ -635,12 +654,13 @@ void CekfFilter::save_state(StateWriter& out) const {
   support::save_capacity(out, "paa", paa_);
   support::save_capacity(out, "phi", phi_);
   support::save_capacity(out, "psi", psi_);
-  support::save_capacity(out, "gt", gt_);
+  // G is saved as Gᵀ (slots × basis), the layout of checkpoint version 1.
+  support::save_capacity(out, "gt", g_.transpose());
   support::save_capacity(out, "p0", p0_);
   out.put("paa", support::pack_lower(paa_, na_));
   out.put("phi", phi_.topLeftCorner(na_, n0_));
   out.put("psi", psi_.topLeftCorner(n0_, n0_));
-  out.put("gt", gt_.topLeftCorner(ns_, n0_));
+  out.put("gt", g_.topLeftCorner(n0_, ns_).transpose());
   // The P⁰ store grows only when a global update needs it: slots past its
   // size have never been written.
   const Index p0_used = std::min<Index>(ns_, p0_.rows());
@@ -705,7 +725,9 @@ void CekfFilter::restore_state(const StateReader& in, int version) {
   take_lower("paa", f.paa_, na);
   take("phi", f.phi_, na, n0);
   take("psi", f.psi_, n0, n0);
-  take("gt", f.gt_, ns, n0);
+  Eigen::MatrixXd gt;
+  take("gt", gt, ns, n0);
+  f.g_ = gt.transpose();
   const Eigen::MatrixXd& p0_used = get_state(in, "p0_used", 1, 1, context);
   if (!(p0_used(0, 0) >= 0 && p0_used(0, 0) <= ns) || p0_used(0, 0) != std::floor(p0_used(0, 0)))
     throw std::invalid_argument(context + ": bad p0_used");
@@ -728,6 +750,7 @@ void CekfFilter::restore_state(const StateReader& in, int version) {
     const std::string name = "memo_" + std::to_string(i);
     std::vector<int> slots = get_ints<int>(in, name + "_slots", 0, ns - 1, context);
     MemoEntry entry;
+    entry.p0_block = f.p0_block(slots);
     entry.quadratic = get_state(in, name + "_quadratic", static_cast<Index>(slots.size()),
                                 static_cast<Index>(slots.size()), context);
     entry.asked = get_state(in, name + "_asked", 1, 1, context)(0, 0) != 0.0;
@@ -761,7 +784,7 @@ Eigen::MatrixXd CekfFilter::active_columns(const std::vector<int>& pos) const {
   return out;
 }
 
-void CekfFilter::p0_column(int s, Eigen::Ref<Eigen::VectorXd> out) const {
+void CekfFilter::p0_column(int s, Eigen::Ref<Eigen::VectorXd, 0, Eigen::InnerStride<>> out) const {
   out.head(s) = p0_.row(s).head(s).transpose();
   out.tail(ns_ - s) = p0_.col(s).segment(s, ns_ - s);
 }
@@ -810,10 +833,10 @@ void CekfFilter::reserve_active(int rows) {
 void CekfFilter::reserve_basis(int cols) {
   grow(phi_, phi_.rows(), cols, na_, n0_);
   grow(psi_, cols, cols, n0_, n0_);
-  grow(gt_, gt_.rows(), cols, ns_, n0_);
+  grow(g_, cols, g_.cols(), n0_, ns_);
 }
 
-void CekfFilter::reserve_slots(int slots) { grow(gt_, slots, gt_.cols(), ns_, n0_); }
+void CekfFilter::reserve_slots(int slots) { grow(g_, g_.rows(), slots, n0_, ns_); }
 
 // The P⁰ store grows only when it is read or written (activation, global
 // update), not with every augmentation: with every row active (churn) it is

@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "mspace/dense_product.hpp"
 #include "mspace/estimator_support.hpp"
 
 namespace mspace::ekf {
@@ -85,7 +86,7 @@ Eigen::VectorXd EkfFilter::apply_update(const std::vector<LinearizedObservation>
 
   // eq. 32: δC_state = −K J C = −W Wᵀ, one symmetric rank-m update of the stored lower
   // triangle (no N×N temporary).
-  store_.topLeftCorner(n_, n_).selfadjointView<Eigen::Lower>().rankUpdate(W, -1.0);
+  add_product(store_.topLeftCorner(n_, n_), -1.0, W, W, ProductPart::lower);
   return dx;
 }
 

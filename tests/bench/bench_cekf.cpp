@@ -40,6 +40,7 @@
 #include <vector>
 
 #include "mspace/cekf_filter.hpp"
+#include "mspace/dense_product.hpp"
 #include "mspace/ekf_filter.hpp"
 #include "range_bearing_scenario.hpp"
 
@@ -226,6 +227,33 @@ BENCHMARK(BM_RangeBearing)
     ->Repetitions(5)
     ->ReportAggregatesOnly(true)
     ->UseRealTime();
+
+/// Arguments: n, k, kernel (0 Eigen, 1 AVX2/FMA). C ← C − A Bᵀ on the lower
+/// triangle of n × n, A and B n × k: a global update of the cekf (n slots, a
+/// basis of k rows) and, with small k, the EKF's eq. 32 on the whole covariance.
+void BM_LowerProduct(benchmark::State& state) {
+  const Eigen::Index n = state.range(0), k = state.range(1);
+  const auto kernel = state.range(2) == 0 ? mspace::ProductKernel::eigen : mspace::ProductKernel::avx2_fma;
+  if (kernel == mspace::ProductKernel::avx2_fma && !mspace::avx2_fma_available()) {
+    state.SkipWithError("no AVX2/FMA on this processor");
+    return;
+  }
+  const Eigen::MatrixXd A = Eigen::MatrixXd::Random(n, k), B = Eigen::MatrixXd::Random(n, k);
+  Eigen::MatrixXd C = Eigen::MatrixXd::Zero(n, n);
+  for (auto _ : state) {
+    mspace::add_product(C, -1.0, A, B, mspace::ProductPart::lower, kernel);
+    benchmark::DoNotOptimize(C.data());
+  }
+  state.counters["GMAC/s"] = benchmark::Counter(static_cast<double>(n * n * k) / 2e9 * static_cast<double>(state.iterations()),
+                                               benchmark::Counter::kIsRate);
+}
+
+BENCHMARK(BM_LowerProduct)
+    ->ArgNames({"n", "k", "avx2"})
+    ->ArgsProduct({{500, 1300, 2500}, {8, 90}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->Repetitions(5)
+    ->ReportAggregatesOnly(true);
 
 }  // namespace
 

@@ -53,8 +53,10 @@
 // Storage. Every state row owns a "slot" in the square P⁰ store (its row and
 // column there) from the moment it is created; slots of removed rows are
 // dropped at the next global update. Entries of P⁰ involving a row that is
-// currently active are stale and never read. G is kept transposed (slots ×
-// basis) so that the basis grows by appending a column.
+// currently active are stale and never read. G is stored basis × slots: the
+// basis coordinates of one slot are contiguous, because the gating queries,
+// activations and the memo read G one slot at a time (thousands of times
+// per global update), while a row is appended only when a row is activated.
 //
 // Observability-constrained mode (optional; Huang, Mourikis & Roumeliotis,
 // IJRR 2010), as in plugins/ekf (see mspace/ekf_filter.hpp): the unobservable
@@ -161,7 +163,7 @@ class CekfFilter final : public Estimator {
   /// P_AA[:, pos] (n_A × pos.size()).
   Eigen::MatrixXd active_columns(const std::vector<int>& pos) const;
   /// Writes column s of the P⁰ store (all ns_ slots) into `out`.
-  void p0_column(int s, Eigen::Ref<Eigen::VectorXd> out) const;
+  void p0_column(int s, Eigen::Ref<Eigen::VectorXd, 0, Eigen::InnerStride<>> out) const;
   /// The rows or columns of a marginal or cross request, split by set:
   /// output positions with their active position (A) or slot (B).
   struct Split {
@@ -169,8 +171,11 @@ class CekfFilter final : public Estimator {
     std::vector<int> active_pos, passive_slot;
   };
   Split split(const std::vector<int>& idx) const;
-  /// G_Jᵀ Ψ G_J for the passive slots J with g = G_{:,J}, from the memo if there.
-  const Eigen::MatrixXd& passive_quadratic(const std::vector<int>& slots, const Eigen::MatrixXd& g) const;
+  struct MemoEntry;
+  /// The memo entry of the passive slots J with g = G_{:,J}, made if not there.
+  const MemoEntry& passive_memo(const std::vector<int>& slots, const Eigen::MatrixXd& g) const;
+  /// P⁰_JJ for the slots J.
+  Eigen::MatrixXd p0_block(const std::vector<int>& slots) const;
   /// Brings the memo up to date with Ψ ← Ψ + V Vᵀ and drops the blocks not asked about.
   void refresh_memo(const Eigen::MatrixXd& V);
   /// Ψ g (n0 × g.cols()).
@@ -246,15 +251,16 @@ class CekfFilter final : public Estimator {
   Eigen::MatrixXd paa_;  ///< capacity²; lower triangle of [0,na_)² is P_AA
   Eigen::MatrixXd phi_;  ///< capacity; [0,na_) × [0,n0_) is Φ
   Eigen::MatrixXd psi_;  ///< capacity²; [0,n0_)² is Ψ (both triangles)
-  Eigen::MatrixXd gt_;   ///< capacity; [0,ns_) × [0,n0_) is Gᵀ (rows of active slots stale)
+  Eigen::MatrixXd g_;    ///< capacity; [0,n0_) × [0,ns_) is G (columns of active slots stale)
   Eigen::MatrixXd p0_;   ///< capacity²; lower triangle of [0,ns_)² is P⁰ (passive pairs valid)
 
-  /// Memo of G_Jᵀ Ψ G_J for the passive blocks J (slot lists) that marginal()
+  /// Memo of P⁰_JJ and G_Jᵀ Ψ G_J for the passive blocks J (slot lists) that marginal()
   /// was asked about: the kernel's gating asks for the same features' marginals
   /// at every reading, and update() keeps the memo exact at O(m n0) per column.
   /// It makes the const marginal() modify the object: not thread-safe.
   struct MemoEntry {
-    Eigen::MatrixXd quadratic;
+    Eigen::MatrixXd quadratic;  ///< G_Jᵀ Ψ G_J
+    Eigen::MatrixXd p0_block;   ///< P⁰_JJ (fixed until the next global update, which empties the memo)
     bool asked = false;  ///< asked about since the last update
   };
   mutable std::map<std::vector<int>, MemoEntry> memo_;

@@ -1,0 +1,105 @@
+// C ← C + α A Bᵀ (mspace/dense_product.hpp): both kernels against a plain
+// triple loop, in full and on the lower triangle, on sizes that are and are
+// not multiples of the AVX2 kernel's 8 × 4 blocks, on blocks of larger
+// matrices (outer stride ≠ rows), and the entries they must leave alone.
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include "mspace/dense_product.hpp"
+
+namespace {
+
+using mspace::add_product;
+using mspace::ProductKernel;
+using mspace::ProductPart;
+
+Eigen::MatrixXd random_matrix(Eigen::Index rows, Eigen::Index cols, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::MatrixXd m(rows, cols);
+  for (Eigen::Index j = 0; j < cols; ++j)
+    for (Eigen::Index i = 0; i < rows; ++i) m(i, j) = u(rng);
+  return m;
+}
+
+/// The reference: the sum in the plain order.
+double entry(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B, Eigen::Index i, Eigen::Index j) {
+  double s = 0.0;
+  for (Eigen::Index l = 0; l < A.cols(); ++l) s += A(i, l) * B(j, l);
+  return s;
+}
+
+std::vector<ProductKernel> kernels() {
+  std::vector<ProductKernel> out{ProductKernel::eigen, ProductKernel::automatic};
+  if (mspace::avx2_fma_available()) out.push_back(ProductKernel::avx2_fma);
+  return out;
+}
+
+struct Sizes {
+  Eigen::Index m, n, k;
+};
+
+class DenseProduct : public ::testing::TestWithParam<Sizes> {};
+
+TEST_P(DenseProduct, FullAndLowerAgreeWithTheSumsOnABlockOfALargerMatrix) {
+  const Sizes s = GetParam();
+  std::mt19937 rng(static_cast<unsigned>(s.m * 1000 + s.n * 10 + s.k));
+  const Eigen::MatrixXd A = random_matrix(s.m, s.k, rng), B = random_matrix(s.n, s.k, rng);
+  const Eigen::MatrixXd start = random_matrix(s.m + 3, s.n + 2, rng);  // C is its block at (1, 2)
+  for (const ProductKernel kernel : kernels()) {
+    for (const ProductPart part : {ProductPart::full, ProductPart::lower}) {
+      if (part == ProductPart::lower && s.m != s.n) continue;
+      SCOPED_TRACE(::testing::Message() << "kernel " << static_cast<int>(kernel) << ", part "
+                                        << static_cast<int>(part));
+      Eigen::MatrixXd store = start;
+      add_product(store.block(1, 2, s.m, s.n), -0.5, A, B, part, kernel);
+      for (Eigen::Index j = 0; j < store.cols(); ++j) {
+        for (Eigen::Index i = 0; i < store.rows(); ++i) {
+          const Eigen::Index bi = i - 1, bj = j - 2;
+          const bool inside = bi >= 0 && bi < s.m && bj >= 0 && bj < s.n;
+          if (!inside || (part == ProductPart::lower && bi < bj)) {
+            ASSERT_EQ(store(i, j), start(i, j)) << "entry (" << i << ", " << j << ") must stay";
+          } else {
+            const double expected = start(i, j) - 0.5 * entry(A, B, bi, bj);
+            ASSERT_NEAR(store(i, j), expected, 1e-13 * (1.0 + static_cast<double>(s.k)))
+                << "entry (" << bi << ", " << bj << ")";
+          }
+        }
+      }
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Sizes, DenseProduct,
+                         ::testing::Values(Sizes{1, 1, 1}, Sizes{8, 8, 4}, Sizes{7, 7, 3}, Sizes{13, 13, 17},
+                                           Sizes{33, 33, 90}, Sizes{101, 101, 6}, Sizes{5, 19, 9},
+                                           Sizes{21, 4, 1}, Sizes{64, 96, 33}));
+
+TEST(DenseProductInput, NoColumnsChangeNothingAndMismatchedSizesAreErrors) {
+  std::mt19937 rng(7);
+  Eigen::MatrixXd C = random_matrix(5, 5, rng);
+  const Eigen::MatrixXd before = C;
+  for (const ProductKernel kernel : kernels()) {
+    add_product(C, 1.0, Eigen::MatrixXd(5, 0), Eigen::MatrixXd(5, 0), ProductPart::lower, kernel);
+    EXPECT_EQ(C, before);
+  }
+  try {
+    add_product(C, 1.0, Eigen::MatrixXd::Zero(5, 2), Eigen::MatrixXd::Zero(4, 2));
+    FAIL() << "mismatched sizes accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("C is 5 x 5, A 5 x 2, B 4 x 2"), std::string::npos) << e.what();
+  }
+  Eigen::MatrixXd tall = Eigen::MatrixXd::Zero(6, 5);
+  EXPECT_THROW(add_product(tall, 1.0, Eigen::MatrixXd::Zero(6, 2), Eigen::MatrixXd::Zero(5, 2), ProductPart::lower),
+               std::invalid_argument);
+  if (!mspace::avx2_fma_available()) {
+    EXPECT_THROW(add_product(C, 1.0, Eigen::MatrixXd::Zero(5, 2), Eigen::MatrixXd::Zero(5, 2), ProductPart::full,
+                             ProductKernel::avx2_fma),
+                 std::invalid_argument);
+  }
+}
+
+}  // namespace
