@@ -1,0 +1,332 @@
+#!/usr/bin/env python3
+"""Peer comparison: MRPT's icp-slam against mspace on the same
+input, all scored by `mspace eval` on the same reference and relations.
+
+    tools/peers/run_peers.py --build build --out out/peers \
+        --inputs intel,ring:1,ladder:1 --systems icp,ekf,smoother
+
+Inputs: `intel` (the Intel Research Lab's 910 scans with raw odometry, from
+$MSPACE_DATA/intel_lab, reference = GMapping's poses, relations = Kuemmerle's)
+and `PLAN:SEED` (an office building written by mspace-sim-building with world
+seed = seed = SEED, reference = its ground truth, relations = its relations).
+Each input becomes one CARMEN log; MRPT gets it through carmen2rawlog, mspace
+reads the same log (Intel: the same scans and odometry from the table both are
+written from).
+
+Systems: icp (MRPT icp-slam, tools/peers/icp-slam.ini), ekf and smoother (`mspace run` with
+config/intel_walls.yaml or config/sim_building.yaml and --estimator), and
+smoother+lc (the smoother with association.loop_closing=true).
+
+(MRPT's rbpf-slam is not run: it reads action/sensory-frame rawlogs, and
+carmen2rawlog 2.5.8 writes observation-only ones, on which it crashes at the
+first entry; rawlog-edit 2.5.8 has no conversion. docs/peers.md.)
+
+MRPT's icp-slam writes one pose per rawlog entry and no time stamps; carmen2rawlog
+turns each laser line into an odometry and a laser entry, in the log's order.
+`rawlog-edit --list-timestamps` lists the entries' classes, so the pose after
+the k-th laser entry is given the time of the k-th laser line of the CARMEN
+log (see mrpt_path_to_tum).
+
+Writes OUT/<input>/result_<system>.json, OUT/results.json (all of them) and OUT/results.md (the
+table of docs/peers.md). Only the standard library; MRPT's tools must be on PATH.
+"""
+import argparse
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SOURCE = os.path.dirname(os.path.dirname(HERE))
+
+
+def log(msg):
+    print(msg, flush=True)
+
+
+def run(cmd, out_file=None, env=None, cwd=None):
+    """Runs cmd (a list); returns (wall seconds, load average at the start).
+    Output goes to out_file; a failure raises with the tail of it."""
+    load = os.getloadavg()[0]
+    start = time.monotonic()
+    with open(out_file or os.devnull, "w") as out:
+        rc = subprocess.call(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                             env=env, cwd=cwd)
+    seconds = time.monotonic() - start
+    if rc != 0:
+        tail = ""
+        if out_file:
+            with open(out_file) as f:
+                tail = "".join(f.readlines()[-15:])
+        raise RuntimeError("%s failed (exit %d)\n%s" % (" ".join(cmd), rc, tail))
+    return seconds, load
+
+
+# ---- inputs -----------------------------------------------------------------
+
+def intel_input(data_dir, out):
+    """The Intel 910 scans as a CARMEN log with raw odometry, and the GMapping
+    reference as `t x y theta`. Beam i of the table is at -90 + i deg; MRPT
+    spreads a scan's beams evenly over its aperture, centred on the laser's
+    heading, so the aperture is 179 deg (PARAM resolution 179/180 deg) and the
+    laser pose of each line is turned by -0.5 deg: beam i lands at -90 + i."""
+    table = os.path.join(data_dir, "intel_lab", "intel_910_scans.txt")
+    relations = os.path.join(data_dir, "intel_lab", "intel.relations")
+    if not os.path.exists(table):
+        raise FileNotFoundError("%s is absent (set MSPACE_DATA)" % table)
+    log_file = os.path.join(out, "intel.clf")
+    reference = os.path.join(out, "intel_gmapping.txt")
+    with open(table) as src, open(log_file, "w") as clf, open(reference, "w") as ref:
+        clf.write("PARAM robot_front_laser_max 81.0\n")
+        clf.write("PARAM laser_front_laser_resolution %.12f\n" % (179.0 / 180.0))
+        ref.write("# t x y theta: GMapping's corrected poses (intel_910_scans.txt)\n")
+        for line in src:
+            f = line.split()
+            if not f or f[0].startswith("#"):
+                continue
+            t, (ox, oy, oth) = f[0], map(float, f[1:4])
+            clf.write("FLASER 180 %s %.6f %.6f %.9f %.6f %.6f %.9f %s peers %s\n" % (
+                " ".join(f[7:187]), ox, oy, oth - math.radians(0.5), ox, oy, oth, t, t))
+            ref.write("%s %s %s %s\n" % (t, f[4], f[5], f[6]))
+    return {"name": "intel", "clf": log_file, "reference": reference, "relations": relations,
+            "config": os.path.join(SOURCE, "config", "intel_walls.yaml"),
+            "env": {"MSPACE_DATA": data_dir}}
+
+
+def building_input(build, plan, seed, out):
+    folder = os.path.join(out, "%s_%d" % (plan, seed))
+    if not os.path.exists(os.path.join(folder, "building.clf")):
+        run([os.path.join(build, "bin", "mspace-sim-building"), "--out", folder, "--plan", plan,
+             "--world-seed", str(seed), "--seed", str(seed), "--laser", "sick181"],
+            os.path.join(out, "sim_%s_%d.log" % (plan, seed)))
+    return {"name": "%s %d" % (plan, seed), "clf": os.path.join(folder, "building.clf"),
+            "reference": os.path.join(folder, "ground_truth.tum"),
+            "relations": os.path.join(folder, "building.relations"),
+            "config": os.path.join(SOURCE, "config", "sim_building.yaml"),
+            "env": {"MSPACE_SIM_BUILDING": folder}}
+
+
+def laser_line_times(clf):
+    """Time stamps of the laser lines of a CARMEN log, in order (the field
+    before the host name, i.e. the third from the end)."""
+    times = []
+    with open(clf) as f:
+        for line in f:
+            if line.startswith(("FLASER", "ROBOTLASER1", "RLASER")):
+                times.append(line.split()[-3])
+    return times
+
+
+# ---- MRPT -------------------------------------------------------------------
+
+def mrpt_path_to_tum(path_file, entries_file, times, tum):
+    """icp-slam's `step x y phi` lines -> `t x y theta`: the pose
+    after the k-th laser entry gets the k-th laser line's time."""
+    classes = []
+    with open(entries_file) as f:
+        for line in f:
+            f3 = line.split()
+            if len(f3) >= 3:
+                classes.append(f3[2])
+    laser_steps = [i for i, c in enumerate(classes) if c.endswith("CObservation2DRangeScan")]
+    if len(laser_steps) != len(times):
+        raise RuntimeError("%s lists %d laser entries, the log has %d laser lines" %
+                           (entries_file, len(laser_steps), len(times)))
+    poses = {}
+    with open(path_file) as f:
+        for line in f:
+            v = line.split()
+            if len(v) >= 4:
+                poses[int(v[0])] = v[1:4]
+    with open(tum, "w") as out:
+        out.write("# t x y theta (from %s)\n" % path_file)
+        for k, step in enumerate(laser_steps):
+            if step in poses:
+                out.write("%s %s %s %s\n" % (times[k], *poses[step]))
+
+
+def write_ini(template, out_dir, ini, overrides):
+    """A copy of template with logOutput_dir = out_dir and each
+    SECTION.KEY=VALUE of overrides replacing that key in that section."""
+    wanted = {}
+    for o in overrides:
+        key, _, value = o.partition("=")
+        section, _, name = key.rpartition(".")
+        wanted[(section, name)] = value
+    with open(template) as f:
+        text = f.read()
+    lines, section, done = [], "", set()
+    for line in text.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("["):
+            section = stripped.strip("[]")
+        name = stripped.partition("=")[0].strip()
+        if name == "logOutput_dir":
+            line = "logOutput_dir = " + out_dir
+        elif (section, name) in wanted and "=" in stripped and not stripped.startswith("#"):
+            line = "%s = %s" % (name, wanted[(section, name)])
+            done.add((section, name))
+        lines.append(line)
+    missing = set(wanted) - done
+    if missing:
+        raise RuntimeError("%s has no key %s" % (template, ", ".join("%s.%s" % m for m in sorted(missing))))
+    with open(ini, "w") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+def run_mrpt(app, inp, work, rawlog, entries, overrides, tag):
+    out_dir = os.path.join(work, app + tag)
+    os.makedirs(out_dir, exist_ok=True)
+    ini = os.path.join(out_dir, app + ".ini")
+    write_ini(os.path.join(HERE, app + ".ini"), os.path.join(out_dir, "log"), ini, overrides)
+    seconds, load = run([app, ini, rawlog], os.path.join(out_dir, app + ".out"), cwd=out_dir)
+    path_name = "log_estimated_path.txt"
+    tum = os.path.join(out_dir, "trajectory.txt")
+    mrpt_path_to_tum(os.path.join(out_dir, "log", path_name), entries, laser_line_times(inp["clf"]), tum)
+    return tum, seconds, load
+
+
+# ---- mspace -----------------------------------------------------------------
+
+def run_mspace(build, system, inp, work, extra_sets):
+    """system: an estimator name, with "+lc" for association.loop_closing on."""
+    estimator, _, loop = system.partition("+")
+    out_dir = os.path.join(work, "mspace_" + system.replace("+", "_"))
+    env = dict(os.environ, **inp["env"])
+    cmd = [os.path.join(build, "bin", "mspace"), "run", inp["config"], "--out", out_dir, "--estimator", estimator,
+           "--quiet"]
+    if loop == "lc":
+        cmd += ["--set", "association.loop_closing=true"]
+    for s in extra_sets:
+        cmd += ["--set", s]
+    seconds, load = run(cmd, out_dir + ".out", env=env)
+    return os.path.join(out_dir, "trajectory.tum"), seconds, load
+
+
+def evaluate(build, trajectory, inp, yaml_file):
+    run([os.path.join(build, "bin", "mspace"), "eval", trajectory, "--reference", inp["reference"],
+         "--relations", inp["relations"], "--yaml", yaml_file], yaml_file + ".out")
+    figures = {}
+    with open(yaml_file) as f:
+        for line in f:
+            key, _, value = line.partition(":")
+            value = value.strip()
+            try:
+                figures[key] = float(value)
+            except ValueError:
+                figures[key] = value.strip('"')
+    return figures
+
+
+# ---- table ------------------------------------------------------------------
+
+def cell(fig, prefix):
+    if fig.get(prefix + "_matched", 0) == 0:
+        return "–"
+    return "%.3f ± %.3f m / %.2f°" % (fig[prefix + "_translation_mean_m"], fig[prefix + "_translation_std_m"],
+                                      fig[prefix + "_rotation_mean_deg"])
+
+
+def markdown(records):
+    rows = ["| input | system | ATE RMSE | relations all (n) | relations long ≥ 60 s (n) | wall time | load (1 min) |",
+            "|---|---|---|---|---|---|---|"]
+    for r in records:
+        if "error" in r:
+            rows.append("| %s | %s | failed: %s | | | | |" % (r["input"], r["system"], r["error"].splitlines()[0]))
+            continue
+        f = r["figures"]
+        rows.append("| %s | %s | %.3f m | %s (%d) | %s (%d) | %.1f s | %.1f |" % (
+            r["input"], r["system"], f["ate_rmse_m"], cell(f, "relations_all"), f.get("relations_all_matched", 0),
+            cell(f, "relations_long"), f.get("relations_long_matched", 0), r["seconds"], r["load"]))
+    return "\n".join(rows) + "\n"
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--build", default=os.path.join(SOURCE, "build"))
+    p.add_argument("--out", default="out/peers")
+    p.add_argument("--data", default=os.environ.get("MSPACE_DATA", os.path.join(SOURCE, "..", "shared", "datasets")))
+    p.add_argument("--inputs", default="intel,ring:1,ladder:1,l_ring:1,grid:1,long_loop:1,symmetric:1",
+                   help="comma-separated: intel and/or PLAN:SEED")
+    p.add_argument("--systems", default="icp,ekf,smoother,smoother+lc",
+                   help="comma-separated: icp, ekf, smoother, smoother+lc")
+    p.add_argument("--reuse", action="store_true",
+                   help="do not run a system again whose trajectory (and timing) OUT/results.json already has; "
+                        "only score it again")
+    p.add_argument("--mrpt-set", action="append", default=[], dest="mrpt_sets",
+                   help="SECTION.KEY=VALUE replacing a key of the MRPT .ini (repeatable), e.g. ICP.thresholdDist=1.0")
+    p.add_argument("--tag", default="", help="appended to the MRPT system's name and folder (for variants)")
+    p.add_argument("--set", action="append", default=[], dest="sets",
+                   help="KEY=VALUE passed to every mspace run (repeatable)")
+    a = p.parse_args()
+    build, out = os.path.abspath(a.build), os.path.abspath(a.out)
+    os.makedirs(out, exist_ok=True)
+    for tool in ("carmen2rawlog", "rawlog-edit"):
+        if shutil.which(tool) is None:
+            sys.exit("%s is not on PATH (Debian: apt-get install mrpt-apps)" % tool)
+    for spec in a.inputs.split(","):
+        if spec == "intel":
+            work = os.path.join(out, "intel")
+            os.makedirs(work, exist_ok=True)
+            try:
+                inp = intel_input(os.path.abspath(a.data), work)
+            except FileNotFoundError as e:
+                log("skipping intel: %s" % e)
+                continue
+        else:
+            plan, seed = spec.split(":")
+            inp = building_input(build, plan, int(seed), out)
+            work = os.path.dirname(inp["clf"])
+        rawlog = os.path.join(work, "input.rawlog")
+        entries = os.path.join(work, "input.entries.txt")
+        if not (a.reuse and os.path.exists(entries)):
+            run(["carmen2rawlog", "-q", "-w", "-i", inp["clf"], "-o", rawlog], rawlog + ".out")
+            run(["rawlog-edit", "--list-timestamps", "-i", rawlog, "--text-file-output", entries], entries + ".out")
+        for system in a.systems.split(","):
+            log("%s: %s ..." % (inp["name"], system))
+            if system not in ("icp", "ekf", "smoother", "smoother+lc"):
+                sys.exit("unknown system '%s' (icp, ekf, smoother, smoother+lc)" % system)
+            mrpt = system == "icp"
+            name = "MRPT icp-slam" + a.tag if mrpt else "mspace " + system
+            # One file per input and system, so that runs of several inputs may go at once.
+            record_file = os.path.join(work, "result_%s.json" % name.replace(" ", "_").replace("+", "_"))
+            earlier = json.load(open(record_file)) if os.path.exists(record_file) else None
+            record = {"input": inp["name"], "system": name}
+            try:
+                if a.reuse and earlier and "seconds" in earlier and os.path.exists(earlier["trajectory"]):
+                    trajectory, seconds, load = earlier["trajectory"], earlier["seconds"], earlier["load"]
+                elif mrpt:
+                    trajectory, seconds, load = run_mrpt("icp-slam", inp, work, rawlog, entries, a.mrpt_sets, a.tag)
+                else:
+                    trajectory, seconds, load = run_mspace(build, system, inp, work, a.sets)
+                record.update(seconds=seconds, load=load, trajectory=trajectory,
+                              figures=evaluate(build, trajectory, inp, trajectory + ".eval.yaml"))
+                if mrpt:
+                    record["mrpt_sets"] = a.mrpt_sets
+                f = record["figures"]
+                log("  ATE %.3f m, relations all %.3f m, long %s, %.1f s (load %.1f)" % (
+                    f["ate_rmse_m"], f.get("relations_all_translation_mean_m", float("nan")),
+                    cell(f, "relations_long"), seconds, load))
+            except Exception as e:  # one failing run must not lose the others
+                record["error"] = str(e)
+                log("  failed: %s" % e)
+            with open(record_file, "w") as f:
+                json.dump(record, f, indent=1)
+    records = []
+    for folder in sorted(os.listdir(out)):
+        path = os.path.join(out, folder)
+        if os.path.isdir(path):
+            records += [json.load(open(os.path.join(path, n))) for n in sorted(os.listdir(path))
+                        if n.startswith("result_") and n.endswith(".json")]
+    with open(os.path.join(out, "results.json"), "w") as f:
+        json.dump(records, f, indent=1)
+    with open(os.path.join(out, "results.md"), "w") as f:
+        f.write(markdown(records))
+    log("table: %s" % os.path.join(out, "results.md"))
+
+
+if __name__ == "__main__":
+    main()
