@@ -5,7 +5,8 @@ input, all scored by `mspace eval` on the same reference and relations.
     tools/peers/run_peers.py --build build --out out/peers \
         --inputs intel,ring:1,ladder:1 --systems icp,ekf,smoother
 
-Inputs: `intel` (the Intel Research Lab's 910 scans with raw odometry, from
+Inputs: `log:FILE[:RELATIONS]` (any CARMEN log with FLASER lines, e.g. another
+building's; mspace runs config/intel_walls.yaml on it), `intel` (the Intel Research Lab's 910 scans with raw odometry, from
 $MSPACE_DATA/intel_lab, reference = GMapping's poses, relations = Kuemmerle's)
 and `PLAN:SEED` (an office building written by mspace-sim-building with world
 seed = seed = SEED, reference = its ground truth, relations = its relations).
@@ -69,10 +70,9 @@ def run(cmd, out_file=None, env=None, cwd=None):
 
 def intel_input(data_dir, out):
     """The Intel 910 scans as a CARMEN log with raw odometry, and the GMapping
-    reference as `t x y theta`. Beam i of the table is at -90 + i deg; MRPT
-    spreads a scan's beams evenly over its aperture, centred on the laser's
-    heading, so the aperture is 179 deg (PARAM resolution 179/180 deg) and the
-    laser pose of each line is turned by -0.5 deg: beam i lands at -90 + i."""
+    reference as `t x y theta`. Beam i of the table is at -90 + i deg, as
+    mspace reads it; for MRPT the aperture is 179 deg and each laser pose is
+    turned by -0.5 deg (flaser_line_for_mrpt)."""
     table = os.path.join(data_dir, "intel_lab", "intel_910_scans.txt")
     relations = os.path.join(data_dir, "intel_lab", "intel.relations")
     if not os.path.exists(table):
@@ -81,19 +81,68 @@ def intel_input(data_dir, out):
     reference = os.path.join(out, "intel_gmapping.txt")
     with open(table) as src, open(log_file, "w") as clf, open(reference, "w") as ref:
         clf.write("PARAM robot_front_laser_max 81.0\n")
-        clf.write("PARAM laser_front_laser_resolution %.12f\n" % (179.0 / 180.0))
+        clf.write("PARAM laser_front_laser_resolution %.12f\n" % flaser_resolution_deg(180, 180.0))
         ref.write("# t x y theta: GMapping's corrected poses (intel_910_scans.txt)\n")
         for line in src:
             f = line.split()
             if not f or f[0].startswith("#"):
                 continue
             t, (ox, oy, oth) = f[0], map(float, f[1:4])
-            clf.write("FLASER 180 %s %.6f %.6f %.9f %.6f %.6f %.9f %s peers %s\n" % (
-                " ".join(f[7:187]), ox, oy, oth - math.radians(0.5), ox, oy, oth, t, t))
+            line = "FLASER 180 %s %.6f %.6f %.9f %.6f %.6f %.9f %s peers %s" % (
+                " ".join(f[7:187]), ox, oy, oth, ox, oy, oth, t, t)
+            clf.write(flaser_line_for_mrpt(line.split(), 180.0) + "\n")
             ref.write("%s %s %s %s\n" % (t, f[4], f[5], f[6]))
     return {"name": "intel", "clf": log_file, "reference": reference, "relations": relations,
             "config": os.path.join(SOURCE, "config", "intel_walls.yaml"),
-            "env": {"MSPACE_DATA": data_dir}}
+            "env": {"MSPACE_DATA": data_dir}, "sets": []}
+
+
+def flaser_line_for_mrpt(fields, fov_deg):
+    """A FLASER line (fields) as MRPT must read it to see the beams where
+    mspace's carmen_log puts them (centred: with n beams over fov, an even n
+    at -fov/2 + i*fov/n, an odd n at -fov/2 + i*fov/(n-1)). MRPT spreads n
+    beams evenly over an aperture centred on the laser's heading, so an even
+    n needs the aperture (n-1)*fov/n and the laser turned by -fov/(2n)."""
+    n = int(fields[1])
+    offset = math.radians(fov_deg) / (2 * n) if n % 2 == 0 else 0.0
+    laser_theta = 2 + n + 2
+    fields = list(fields)
+    fields[laser_theta] = "%.9f" % (float(fields[laser_theta]) - offset)
+    return " ".join(fields)
+
+
+def flaser_resolution_deg(n, fov_deg):
+    """The PARAM laser_front_laser_resolution that gives MRPT the aperture
+    flaser_line_for_mrpt assumes (MRPT: aperture = resolution * n)."""
+    aperture = (n - 1) * fov_deg / n if n % 2 == 0 else fov_deg
+    return aperture / n
+
+
+def log_input(path, relations, fov_deg, out):
+    """Any CARMEN log with FLASER lines (e.g. another building's): mspace reads
+    it with config/intel_walls.yaml (no ground truth), MRPT a copy whose
+    FLASER lines are adjusted as flaser_line_for_mrpt says. Scored by the
+    relations file when one is given."""
+    name = os.path.splitext(os.path.basename(path))[0]
+    work = os.path.join(out, "log_" + name)
+    os.makedirs(work, exist_ok=True)
+    mrpt_log = os.path.join(work, name + ".mrpt.clf")
+    resolution = None
+    with open(path) as src, open(mrpt_log, "w") as dst:
+        for line in src:
+            f = line.split()
+            if not f or (f[0] == "PARAM" and len(f) > 1 and f[1] == "laser_front_laser_resolution"):
+                continue
+            if f[0] == "FLASER":
+                if resolution is None:
+                    resolution = flaser_resolution_deg(int(f[1]), fov_deg)
+                    dst.write("PARAM laser_front_laser_resolution %.12f\n" % resolution)
+                line = flaser_line_for_mrpt(f, fov_deg) + "\n"
+            dst.write(line)
+    sets = ["source.file=" + os.path.abspath(path), "source.ground_truth=none", "source.initial_pose=odometry",
+            "source.flaser_fov_deg=%g" % fov_deg, "evaluation.relations=" + (os.path.abspath(relations) if relations else "")]
+    return {"name": name, "clf": mrpt_log, "reference": None, "relations": relations,
+            "config": os.path.join(SOURCE, "config", "intel_walls.yaml"), "env": {}, "sets": sets, "work": work}
 
 
 def building_input(build, plan, seed, out):
@@ -106,7 +155,7 @@ def building_input(build, plan, seed, out):
             "reference": os.path.join(folder, "ground_truth.tum"),
             "relations": os.path.join(folder, "building.relations"),
             "config": os.path.join(SOURCE, "config", "sim_building.yaml"),
-            "env": {"MSPACE_SIM_BUILDING": folder}}
+            "env": {"MSPACE_SIM_BUILDING": folder}, "sets": []}
 
 
 def laser_line_times(clf):
@@ -200,15 +249,21 @@ def run_mspace(build, system, inp, work, extra_sets):
            "--quiet"]
     if loop == "lc":
         cmd += ["--set", "association.loop_closing=true"]
-    for s in extra_sets:
+    for s in inp["sets"] + extra_sets:
         cmd += ["--set", s]
     seconds, load = run(cmd, out_dir + ".out", env=env)
     return os.path.join(out_dir, "trajectory.tum"), seconds, load
 
 
 def evaluate(build, trajectory, inp, yaml_file):
-    run([os.path.join(build, "bin", "mspace"), "eval", trajectory, "--reference", inp["reference"],
-         "--relations", inp["relations"], "--yaml", yaml_file], yaml_file + ".out")
+    cmd = [os.path.join(build, "bin", "mspace"), "eval", trajectory, "--yaml", yaml_file]
+    if inp["reference"]:
+        cmd += ["--reference", inp["reference"]]
+    if inp["relations"]:
+        cmd += ["--relations", inp["relations"]]
+    if len(cmd) == 5:
+        return {}
+    run(cmd, yaml_file + ".out")
     figures = {}
     with open(yaml_file) as f:
         for line in f:
@@ -238,8 +293,8 @@ def markdown(records):
             rows.append("| %s | %s | failed: %s | | | | |" % (r["input"], r["system"], r["error"].splitlines()[0]))
             continue
         f = r["figures"]
-        rows.append("| %s | %s | %.3f m | %s (%d) | %s (%d) | %.1f s | %.1f |" % (
-            r["input"], r["system"], f["ate_rmse_m"], cell(f, "relations_all"), f.get("relations_all_matched", 0),
+        rows.append("| %s | %s | %s | %s (%d) | %s (%d) | %.1f s | %.1f |" % (
+            r["input"], r["system"], "%.3f m" % f["ate_rmse_m"] if "ate_rmse_m" in f else "–", cell(f, "relations_all"), f.get("relations_all_matched", 0),
             cell(f, "relations_long"), f.get("relations_long_matched", 0), r["seconds"], r["load"]))
     return "\n".join(rows) + "\n"
 
@@ -250,7 +305,10 @@ def main():
     p.add_argument("--out", default="out/peers")
     p.add_argument("--data", default=os.environ.get("MSPACE_DATA", os.path.join(SOURCE, "..", "shared", "datasets")))
     p.add_argument("--inputs", default="intel,ring:1,ladder:1,l_ring:1,grid:1,long_loop:1,symmetric:1",
-                   help="comma-separated: intel and/or PLAN:SEED")
+                   help="comma-separated: intel, PLAN:SEED (a generated building), log:FILE[:RELATIONS] (any "
+                        "CARMEN log with FLASER lines)")
+    p.add_argument("--flaser-fov-deg", type=float, default=180.0,
+                   help="field of view of a log: input's FLASER scans (as carmen_log's flaser_fov_deg)")
     p.add_argument("--systems", default="icp,ekf,smoother,smoother+lc",
                    help="comma-separated: icp, ekf, smoother, smoother+lc")
     p.add_argument("--reuse", action="store_true",
@@ -276,6 +334,10 @@ def main():
             except FileNotFoundError as e:
                 log("skipping intel: %s" % e)
                 continue
+        elif spec.startswith("log:"):
+            parts = spec.split(":")
+            inp = log_input(parts[1], parts[2] if len(parts) > 2 else None, a.flaser_fov_deg, out)
+            work = inp["work"]
         else:
             plan, seed = spec.split(":")
             inp = building_input(build, plan, int(seed), out)
@@ -308,7 +370,7 @@ def main():
                     record["mrpt_sets"] = a.mrpt_sets
                 f = record["figures"]
                 log("  ATE %.3f m, relations all %.3f m, long %s, %.1f s (load %.1f)" % (
-                    f["ate_rmse_m"], f.get("relations_all_translation_mean_m", float("nan")),
+                    f.get("ate_rmse_m", float("nan")), f.get("relations_all_translation_mean_m", float("nan")),
                     cell(f, "relations_long"), seconds, load))
             except Exception as e:  # one failing run must not lose the others
                 record["error"] = str(e)
