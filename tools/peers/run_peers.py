@@ -1,20 +1,23 @@
 #!/usr/bin/env python3
-"""Peer comparison: MRPT's icp-slam against mspace on the same
-input, all scored by `mspace eval` on the same reference and relations.
+"""Peer comparison: MRPT's icp-slam against mspace on the same input, all
+scored by `mspace eval` on the same reference and relations (docs/peers.md).
 
     tools/peers/run_peers.py --build build --out out/peers \
         --inputs intel,ring:1,ladder:1 --systems icp,ekf,smoother
 
-Inputs: `log:FILE[:RELATIONS]` (any CARMEN log with FLASER lines, e.g. another
-building's; mspace runs config/intel_walls.yaml on it), `intel` (the Intel Research Lab's 910 scans with raw odometry, from
-$MSPACE_DATA/intel_lab, reference = GMapping's poses, relations = Kuemmerle's)
-and `PLAN:SEED` (an office building written by mspace-sim-building with world
-seed = seed = SEED, reference = its ground truth, relations = its relations).
+Inputs: `intel` (the Intel Research Lab's 910 scans with raw odometry, from
+$MSPACE_DATA/intel_lab; reference = GMapping's poses, relations = Kuemmerle's),
+`PLAN:SEED[:PEOPLE]` (an office building written by mspace-sim-building with
+world seed = seed = SEED and PEOPLE people walking, by default the plan's: 2,
+none in symmetric; reference = its ground truth, relations = its relations)
+and `log:FILE[:RELATIONS]` (any CARMEN log with FLASER lines, e.g. another
+building's; mspace runs config/intel_walls.yaml on it, scored by RELATIONS).
 Each input becomes one CARMEN log; MRPT gets it through carmen2rawlog, mspace
 reads the same log (Intel: the same scans and odometry from the table both are
 written from).
 
-Systems: icp (MRPT icp-slam, tools/peers/icp-slam.ini), ekf and smoother (`mspace run` with
+Systems: odometry (the input's wheel odometry alone, scored for scale), icp
+(MRPT icp-slam, tools/peers/icp-slam.ini), ekf and smoother (`mspace run` with
 config/intel_walls.yaml or config/sim_building.yaml and --estimator), and
 smoother+lc (the smoother with association.loop_closing=true).
 
@@ -22,14 +25,14 @@ smoother+lc (the smoother with association.loop_closing=true).
 carmen2rawlog 2.5.8 writes observation-only ones, on which it crashes at the
 first entry; rawlog-edit 2.5.8 has no conversion. docs/peers.md.)
 
-MRPT's icp-slam writes one pose per rawlog entry and no time stamps; carmen2rawlog
-turns each laser line into an odometry and a laser entry, in the log's order.
+MRPT's icp-slam writes one pose per rawlog entry and no time stamps;
+carmen2rawlog turns each laser line into an odometry and a laser entry, in the log's order.
 `rawlog-edit --list-timestamps` lists the entries' classes, so the pose after
 the k-th laser entry is given the time of the k-th laser line of the CARMEN
 log (see mrpt_path_to_tum).
 
-Writes OUT/<input>/result_<system>.json, OUT/results.json (all of them) and OUT/results.md (the
-table of docs/peers.md). Only the standard library; MRPT's tools must be on PATH.
+Writes OUT/<input>/result_<system>.json, OUT/results.json (all of them) and
+OUT/results.md (the table of docs/peers.md). Only the standard library; MRPT's tools must be on PATH.
 """
 import argparse
 import json
@@ -79,7 +82,8 @@ def intel_input(data_dir, out):
         raise FileNotFoundError("%s is absent (set MSPACE_DATA)" % table)
     log_file = os.path.join(out, "intel.clf")
     reference = os.path.join(out, "intel_gmapping.txt")
-    with open(table) as src, open(log_file, "w") as clf, open(reference, "w") as ref:
+    odometry = os.path.join(out, "intel_odometry.txt")
+    with open(table) as src, open(log_file, "w") as clf, open(reference, "w") as ref, open(odometry, "w") as odo:
         clf.write("PARAM robot_front_laser_max 81.0\n")
         clf.write("PARAM laser_front_laser_resolution %.12f\n" % flaser_resolution_deg(180, 180.0))
         ref.write("# t x y theta: GMapping's corrected poses (intel_910_scans.txt)\n")
@@ -92,7 +96,8 @@ def intel_input(data_dir, out):
                 " ".join(f[7:187]), ox, oy, oth, ox, oy, oth, t, t)
             clf.write(flaser_line_for_mrpt(line.split(), 180.0) + "\n")
             ref.write("%s %s %s %s\n" % (t, f[4], f[5], f[6]))
-    return {"name": "intel", "clf": log_file, "reference": reference, "relations": relations,
+            odo.write("%s %s %s %s\n" % (t, f[1], f[2], f[3]))
+    return {"name": "intel", "clf": log_file, "reference": reference, "relations": relations, "odometry": odometry,
             "config": os.path.join(SOURCE, "config", "intel_walls.yaml"),
             "env": {"MSPACE_DATA": data_dir}, "sets": []}
 
@@ -141,19 +146,24 @@ def log_input(path, relations, fov_deg, out):
             dst.write(line)
     sets = ["source.file=" + os.path.abspath(path), "source.ground_truth=none", "source.initial_pose=odometry",
             "source.flaser_fov_deg=%g" % fov_deg, "evaluation.relations=" + (os.path.abspath(relations) if relations else "")]
-    return {"name": name, "clf": mrpt_log, "reference": None, "relations": relations,
+    return {"name": name, "clf": mrpt_log, "reference": None, "relations": relations, "odometry": None,
             "config": os.path.join(SOURCE, "config", "intel_walls.yaml"), "env": {}, "sets": sets, "work": work}
 
 
-def building_input(build, plan, seed, out):
-    folder = os.path.join(out, "%s_%d" % (plan, seed))
+def building_input(build, plan, seed, people, out):
+    """people: None for the simulator's default (two people walking), else their number."""
+    suffix = "" if people is None else "_people%d" % people
+    folder = os.path.join(out, "%s_%d%s" % (plan, seed, suffix))
     if not os.path.exists(os.path.join(folder, "building.clf")):
         run([os.path.join(build, "bin", "mspace-sim-building"), "--out", folder, "--plan", plan,
-             "--world-seed", str(seed), "--seed", str(seed), "--laser", "sick181"],
-            os.path.join(out, "sim_%s_%d.log" % (plan, seed)))
-    return {"name": "%s %d" % (plan, seed), "clf": os.path.join(folder, "building.clf"),
+             "--world-seed", str(seed), "--seed", str(seed), "--laser", "sick181"] +
+            ([] if people is None else ["--people", str(people)]),
+            os.path.join(out, "sim_%s_%d%s.log" % (plan, seed, suffix)))
+    return {"name": "%s %d%s" % (plan, seed, "" if people is None else ", %d people" % people),
+            "clf": os.path.join(folder, "building.clf"),
             "reference": os.path.join(folder, "ground_truth.tum"),
             "relations": os.path.join(folder, "building.relations"),
+            "odometry": os.path.join(folder, "odometry.tum"),
             "config": os.path.join(SOURCE, "config", "sim_building.yaml"),
             "env": {"MSPACE_SIM_BUILDING": folder}, "sets": []}
 
@@ -281,21 +291,22 @@ def evaluate(build, trajectory, inp, yaml_file):
 def cell(fig, prefix):
     if fig.get(prefix + "_matched", 0) == 0:
         return "–"
-    return "%.3f ± %.3f m / %.2f°" % (fig[prefix + "_translation_mean_m"], fig[prefix + "_translation_std_m"],
-                                      fig[prefix + "_rotation_mean_deg"])
+    return "%.3f ± %.3f m, %.2f°" % (fig[prefix + "_translation_mean_m"], fig[prefix + "_translation_std_m"],
+                                     fig[prefix + "_rotation_mean_deg"])
 
 
 def markdown(records):
-    rows = ["| input | system | ATE RMSE | relations all (n) | relations long ≥ 60 s (n) | wall time | load (1 min) |",
-            "|---|---|---|---|---|---|---|"]
+    rows = ["| input | system | ATE RMSE | relations: all | short (< 60 s) | long (≥ 60 s) (n) | wall time | load (1 min) |",
+            "|---|---|---|---|---|---|---|---|"]
     for r in records:
         if "error" in r:
-            rows.append("| %s | %s | failed: %s | | | | |" % (r["input"], r["system"], r["error"].splitlines()[0]))
+            rows.append("| %s | %s | failed: %s | | | | | |" % (r["input"], r["system"], r["error"].splitlines()[0]))
             continue
         f = r["figures"]
-        rows.append("| %s | %s | %s | %s (%d) | %s (%d) | %.1f s | %.1f |" % (
-            r["input"], r["system"], "%.3f m" % f["ate_rmse_m"] if "ate_rmse_m" in f else "–", cell(f, "relations_all"), f.get("relations_all_matched", 0),
-            cell(f, "relations_long"), f.get("relations_long_matched", 0), r["seconds"], r["load"]))
+        rows.append("| %s | %s | %s | %s | %s | %s (%d) | %.0f s | %.0f |" % (
+            r["input"], r["system"], "%.3f m" % f["ate_rmse_m"] if "ate_rmse_m" in f else "–",
+            cell(f, "relations_all"), cell(f, "relations_short"), cell(f, "relations_long"),
+            f.get("relations_long_matched", 0), r["seconds"], r["load"]))
     return "\n".join(rows) + "\n"
 
 
@@ -305,12 +316,12 @@ def main():
     p.add_argument("--out", default="out/peers")
     p.add_argument("--data", default=os.environ.get("MSPACE_DATA", os.path.join(SOURCE, "..", "shared", "datasets")))
     p.add_argument("--inputs", default="intel,ring:1,ladder:1,l_ring:1,grid:1,long_loop:1,symmetric:1",
-                   help="comma-separated: intel, PLAN:SEED (a generated building), log:FILE[:RELATIONS] (any "
+                   help="comma-separated: intel, PLAN:SEED[:PEOPLE] (a generated building; PEOPLE walking, default the plan's), log:FILE[:RELATIONS] (any "
                         "CARMEN log with FLASER lines)")
     p.add_argument("--flaser-fov-deg", type=float, default=180.0,
                    help="field of view of a log: input's FLASER scans (as carmen_log's flaser_fov_deg)")
-    p.add_argument("--systems", default="icp,ekf,smoother,smoother+lc",
-                   help="comma-separated: icp, ekf, smoother, smoother+lc")
+    p.add_argument("--systems", default="odometry,icp,ekf,smoother,smoother+lc",
+                   help="comma-separated: odometry, icp, ekf, smoother, smoother+lc")
     p.add_argument("--reuse", action="store_true",
                    help="do not run a system again whose trajectory (and timing) OUT/results.json already has; "
                         "only score it again")
@@ -325,7 +336,7 @@ def main():
     for tool in ("carmen2rawlog", "rawlog-edit"):
         if shutil.which(tool) is None:
             sys.exit("%s is not on PATH (Debian: apt-get install mrpt-apps)" % tool)
-    for spec in a.inputs.split(","):
+    for spec in filter(None, a.inputs.split(",")):  # --inputs "": only the table again
         if spec == "intel":
             work = os.path.join(out, "intel")
             os.makedirs(work, exist_ok=True)
@@ -339,8 +350,8 @@ def main():
             inp = log_input(parts[1], parts[2] if len(parts) > 2 else None, a.flaser_fov_deg, out)
             work = inp["work"]
         else:
-            plan, seed = spec.split(":")
-            inp = building_input(build, plan, int(seed), out)
+            parts = spec.split(":")  # PLAN:SEED[:PEOPLE]
+            inp = building_input(build, parts[0], int(parts[1]), int(parts[2]) if len(parts) > 2 else None, out)
             work = os.path.dirname(inp["clf"])
         rawlog = os.path.join(work, "input.rawlog")
         entries = os.path.join(work, "input.entries.txt")
@@ -349,10 +360,12 @@ def main():
             run(["rawlog-edit", "--list-timestamps", "-i", rawlog, "--text-file-output", entries], entries + ".out")
         for system in a.systems.split(","):
             log("%s: %s ..." % (inp["name"], system))
-            if system not in ("icp", "ekf", "smoother", "smoother+lc"):
-                sys.exit("unknown system '%s' (icp, ekf, smoother, smoother+lc)" % system)
+            if system not in ("odometry", "icp", "ekf", "smoother", "smoother+lc"):
+                sys.exit("unknown system '%s' (odometry, icp, ekf, smoother, smoother+lc)" % system)
+            if system == "odometry" and not inp["odometry"]:
+                continue
             mrpt = system == "icp"
-            name = "MRPT icp-slam" + a.tag if mrpt else "mspace " + system
+            name = {"icp": "MRPT icp-slam" + a.tag, "odometry": "wheel odometry alone"}.get(system, "mspace " + system)
             # One file per input and system, so that runs of several inputs may go at once.
             record_file = os.path.join(work, "result_%s.json" % name.replace(" ", "_").replace("+", "_"))
             earlier = json.load(open(record_file)) if os.path.exists(record_file) else None
@@ -360,6 +373,8 @@ def main():
             try:
                 if a.reuse and earlier and "seconds" in earlier and os.path.exists(earlier["trajectory"]):
                     trajectory, seconds, load = earlier["trajectory"], earlier["seconds"], earlier["load"]
+                elif system == "odometry":  # the input's own odometry, for scale
+                    trajectory, seconds, load = inp["odometry"], 0.0, os.getloadavg()[0]
                 elif mrpt:
                     trajectory, seconds, load = run_mrpt("icp-slam", inp, work, rawlog, entries, a.mrpt_sets, a.tag)
                 else:
