@@ -7,6 +7,9 @@
 //   mspace config [CONFIG]            the fully resolved configuration
 //   mspace check PLUGIN... [--junit F] the plugin conformance suite (files or names); with an
 //                                     extractor and a feature type also their pair check
+//   mspace eval TRAJECTORY [--reference REF] [--relations FILE]
+//                                     scores any trajectory file (TUM or `t x y theta`):
+//                                     ATE and relations, all / short / long (eval_command.cpp)
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
@@ -20,6 +23,7 @@
 #include "check.hpp"
 #include "checkpoint.hpp"
 #include "config.hpp"
+#include "eval_command.hpp"
 #include "logging.hpp"
 #include "mspace/abi.hpp"
 #include "plugin_registry.hpp"
@@ -252,7 +256,29 @@ int main(int argc, char** argv) {
   check->add_option("--param", check_cmd.params, "NAME=VALUE for the checked instances, e.g. a data file (repeatable)");
   add_common(check, common);
 
-  if (const auto unknown = unknown_subcommand(argc, argv, {"run", "plugins", "config", "check"})) {
+  EvalOptions eval_options;
+  std::string eval_yaml;
+  CLI::App* eval = app.add_subcommand(
+      "eval", "score a trajectory file (TUM `t x y z qx qy qz qw` or `t x y theta`) against a reference trajectory "
+              "(ATE, SE(2) alignment) and/or Kuemmerle relations (all, short and long)");
+  eval->add_option("trajectory", eval_options.estimate, "the estimated trajectory")->required();
+  eval->add_option("--reference", eval_options.reference, "reference trajectory for the ATE (TUM or `t x y theta`)");
+  eval->add_option("--relations", eval_options.relations, "relations file: `t1 t2 x y z roll pitch yaw` per line");
+  eval->add_option("--max-gap", eval_options.max_gap,
+                   "ATE: do not interpolate the estimate between poses further apart than this (s)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  eval->add_option("--relations-max-dt", eval_options.relations_max_dt,
+                   "relations: a stamp must be this close to an estimated pose (s)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  eval->add_option("--long", eval_options.long_seconds,
+                   "relations at least this many seconds long are reported as the long ones")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  eval->add_option("--yaml", eval_yaml, "also write the figures to this file as `key: value` lines");
+
+  if (const auto unknown = unknown_subcommand(argc, argv, {"run", "plugins", "config", "check", "eval"})) {
     std::cerr << "mspace: error: " << *unknown << "\n";
     return 2;
   }
@@ -261,6 +287,12 @@ int main(int argc, char** argv) {
     if (run->parsed()) return cmd_run(run_cmd, common);
     if (plugins->parsed()) return cmd_plugins(common);
     if (config->parsed()) return cmd_config(config_file, config_sets, common);
+    if (eval->parsed()) {
+      const EvalResult result = evaluate_files(eval_options);
+      print_eval(std::cout, result, eval_options);
+      if (!eval_yaml.empty()) write_eval_yaml(eval_yaml, result, eval_options);
+      return 0;
+    }
     if (check->parsed()) {
       PluginRegistry registry;
       setup_registry(registry, common);
