@@ -13,6 +13,7 @@
 
 #include "chi2.hpp"
 #include "logging.hpp"
+#include "mspace/feature_log.hpp"
 #include "mspace/transform.hpp"
 #include "problem.hpp"
 
@@ -88,6 +89,22 @@ struct Slam::ReadingWork {
   std::vector<bool> may_create;  ///< per measurement: far from every feature
 };
 
+std::shared_ptr<Feature> FeatureTypeSlot::adopt(std::unique_ptr<Feature> feature, std::int64_t id) const {
+  if (!feature) return nullptr;
+  if (!log)  // tools and tests without the type's logger: feature_log() drops everything
+    return std::shared_ptr<Feature>(feature.release(), [library = library](Feature* p) { delete p; });
+  std::string prefix = "#";  // appended piecewise: GCC 12 -Wrestrict misfires on "#" + std::to_string(id)
+  prefix.append(std::to_string(id)).append(": ");
+  std::shared_ptr<Logger> prefixed = make_prefixed_logger(log, std::move(prefix));
+  attach_feature_log(*feature, prefixed.get());
+  // The deleter owns what the feature refers to, its plugin library and its
+  // logger, and detaches the logger first (the address may be reused).
+  return std::shared_ptr<Feature>(feature.release(), [library = library, prefixed](Feature* p) {
+    attach_feature_log(*p, nullptr);
+    delete p;
+  });
+}
+
 Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     : config_(config),
       log_(make_instance_logger("slam")),
@@ -111,6 +128,7 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     slot.instance = fc.instance;
     slot.plugin = fc.plugin;
     slot.type = make(fc, PluginKind::Feature, static_cast<FeatureType*>(nullptr), slot.library);
+    slot.log = plugin_loggers_.back();
     types_.push_back(std::move(slot));
   }
   for (const SensorConfig& sc : config_.sensors) {
@@ -585,8 +603,7 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
         MapFeature mf;
         mf.id = next_feature_id_++;
         mf.type = type_index;
-        auto library = type.library;
-        mf.feature = std::shared_ptr<Feature>(created.release(), [library](Feature* p) { delete p; });
+        mf.feature = type.adopt(std::move(created), mf.id);
         mf.created_step = step_;
         mf.last_seen_step = step_;
         mf.created_path = mf.last_seen_path = path_distance_;

@@ -69,6 +69,13 @@ struct FeatureTypeSlot {
   std::string plugin;
   std::shared_ptr<const LoadedPlugin> library;
   std::shared_ptr<FeatureType> type;
+  std::shared_ptr<Logger> log;  ///< the instance's logger, shared by its features
+
+  /// Takes a feature this type made (create() or restore()): the result keeps
+  /// the plugin library loaded while it lives, and feature_log() of the
+  /// feature (mspace/feature_log.hpp) writes through the instance's logger
+  /// with "#<id>: " in front.
+  std::shared_ptr<Feature> adopt(std::unique_ptr<Feature> feature, std::int64_t id) const;
 };
 
 struct SensorSlot {
