@@ -297,6 +297,7 @@ bool Slam::relinearize(bool end_of_data) {
 
 void Slam::predict(const DataStep& data) {
   const double dt = started_ ? data.t - t_ : 0.0;
+  if (!started_) dead_reckoning_pose_ = x_r_;  // the baseline starts where the run starts
   started_ = true;
   t_ = data.t;
   if (data.odometry.size() == 0) {
@@ -334,6 +335,14 @@ void Slam::predict(const DataStep& data) {
                         std::to_string(pred.C_d.rows()) + " x " + std::to_string(pred.C_d.cols()));
     pred.C_d = C_data;
   }
+
+  // The dead-reckoning baseline: the same increment through the same model, never updated.
+  const Pose6 dead_reckoning = guarded(config_.motion.instance, *motion_lib_, "predict", [&] {
+    return motion_->predict(dead_reckoning_pose_, data.odometry, dt).pose;
+  });
+  require_finite(dead_reckoning, "dead-reckoning pose", config_.motion.instance, *motion_lib_);
+  dead_reckoning_pose_ = dead_reckoning;
+  ++odometry_steps_;
 
   const Pose6 delta = pose_difference(pred.pose, x_r_);
   path_distance_ += delta.head<3>().norm() + kRotationWeightMetresPerRadian * delta.tail<3>().norm();
@@ -845,8 +854,24 @@ void Slam::prune_tentative() {
   stats_.pruned += static_cast<std::int64_t>(before - features_.size());
 }
 
+std::vector<StampedPose> Slam::dead_reckoning_evaluated() const {
+  if (ground_truth_sensor_ < 0) return dead_reckoning_;
+  std::vector<StampedPose> out = dead_reckoning_;
+  for (StampedPose& p : out) p.pose = compound(p.pose, sensors_[ground_truth_sensor_].config.mount);
+  return out;
+}
+
+std::string Slam::odometry_description() const {
+  std::string text = "source plugin '" + config_.source.plugin + "'";
+  const Params& params = config_.source.params;
+  if (params.has("odometry") && std::holds_alternative<std::string>(params.values().at("odometry")))
+    text += ", odometry: " + params.get_string("odometry");
+  return text;
+}
+
 void Slam::record(const DataStep& data) {
   trajectory_.push_back({data.t, x_r_, kAllPoseCoords});
+  dead_reckoning_.push_back({data.t, dead_reckoning_pose_, kAllPoseCoords});
   record_path_.push_back(path_distance_);
   // The frame the ground truth refers to: the robot, or a sensor on it
   // (e.g. a GPS antenna mounted with the laser), x_r ⊕ x_rs (eq. 17).
