@@ -126,6 +126,9 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
   run.put("trajectory", poses_matrix(trajectory_));
   run.put("ground_truth", poses_matrix(ground_truth_));
   run.put("evaluated", poses_matrix(evaluated_));
+  run.put("dead_reckoning", poses_matrix(dead_reckoning_));
+  run.put("dead_reckoning_pose", dead_reckoning_pose_);
+  run.put("odometry_steps", row_of({static_cast<double>(odometry_steps_)}));
   const AssociationStats& a = associator_.stats();
   run.put("association", row_of({static_cast<double>(a.jcbb_readings), static_cast<double>(a.jcbb_nodes),
                                  static_cast<double>(a.jcbb_bounded), static_cast<double>(a.index_queries)}));
@@ -289,6 +292,10 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     std::vector<StampedPose> trajectory = poses_from(run, "trajectory");
     std::vector<StampedPose> ground_truth = poses_from(run, "ground_truth");
     std::vector<StampedPose> evaluated = poses_from(run, "evaluated");
+    std::vector<StampedPose> dead_reckoning = poses_from(run, "dead_reckoning");
+    const Pose6 dead_reckoning_pose = get_state(run, "dead_reckoning_pose", 6, 1, "run state");
+    const std::int64_t odometry_steps =
+        integer_at(get_state(run, "odometry_steps", 1, 1, "run state"), 0, 0, 1e15, "odometry_steps");
     for (std::size_t i = 0; i < health_.size(); ++i) health_[i].restore(run, "health_" + std::to_string(i) + "_");
     covariance_health_.restore(run, "covariance_health_");
 
@@ -346,6 +353,9 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     trajectory_ = std::move(trajectory);
     ground_truth_ = std::move(ground_truth);
     evaluated_ = std::move(evaluated);
+    dead_reckoning_ = std::move(dead_reckoning);
+    dead_reckoning_pose_ = dead_reckoning_pose;
+    odometry_steps_ = odometry_steps;
     record_path_.assign(record_path.data(), record_path.data() + record_path.size());
     last_loop_attempt_path_ = loops(0, 0);
     last_loop_local_signature_ = static_cast<std::int64_t>(loops(0, 1));

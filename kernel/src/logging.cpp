@@ -59,6 +59,24 @@ class SpdLogger final : public Logger {
   spdlog::logger logger_;
 };
 
+/// Writes through another logger with a fixed text in front of each message.
+class PrefixedLogger final : public Logger {
+ public:
+  PrefixedLogger(std::shared_ptr<Logger> target, std::string prefix)
+      : target_(std::move(target)), prefix_(std::move(prefix)) {}
+  void write(LogLevel level, std::string_view message) override {
+    std::string line;
+    line.reserve(prefix_.size() + message.size());
+    line.append(prefix_).append(message);
+    target_->write(level, line);
+  }
+  bool enabled(LogLevel level) const override { return target_->enabled(level); }
+
+ private:
+  std::shared_ptr<Logger> target_;
+  std::string prefix_;
+};
+
 }  // namespace
 
 LogLevel parse_log_level(const std::string& text) {
@@ -79,6 +97,11 @@ LogLevel log_level() { return g_level.load(std::memory_order_relaxed); }
 
 std::shared_ptr<Logger> make_instance_logger(const std::string& instance) {
   return std::make_shared<SpdLogger>(instance);
+}
+
+std::shared_ptr<Logger> make_prefixed_logger(std::shared_ptr<Logger> target, std::string prefix) {
+  if (!target) throw std::invalid_argument("make_prefixed_logger: no logger to write through");
+  return std::make_shared<PrefixedLogger>(std::move(target), std::move(prefix));
 }
 
 Logger& kernel_log() {

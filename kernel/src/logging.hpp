@@ -28,6 +28,10 @@ LogLevel log_level();
 /// A new logger named after a plugin instance (give it to PluginArgs::logger).
 std::shared_ptr<Logger> make_instance_logger(const std::string& instance);
 
+/// A logger that writes through `target` with `prefix` in front of every
+/// message, e.g. a feature's ("#12: "), attached by FeatureTypeSlot::adopt.
+std::shared_ptr<Logger> make_prefixed_logger(std::shared_ptr<Logger> target, std::string prefix);
+
 /// The kernel's own logger, named "mspace": kernel_log().info("loaded ", n, " plugins").
 Logger& kernel_log();
 

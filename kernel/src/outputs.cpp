@@ -35,6 +35,45 @@ std::ofstream open_for_writing(const std::filesystem::path& file) {
   return out;
 }
 
+/// The ATE figures of `e` as keys of the open map (12 significant digits, so
+/// that a third-party check on the pose files can be exact).
+void emit_trajectory_errors(YAML::Emitter& y, const TrajectoryErrors& e) {
+  y << YAML::Key << "poses_compared" << YAML::Value << e.matched;
+  y << YAML::Key << "ate_rmse_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_rmse;
+  y << YAML::Key << "ate_median_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_median;
+  y << YAML::Key << "ate_max_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_max;
+  y << YAML::Key << "final_translation_error_m" << YAML::Value << e.final_translation;
+  if (e.final_heading) y << YAML::Key << "final_heading_error_deg" << YAML::Value << *e.final_heading * kRadToDeg;
+}
+
+/// The relation statistics of `r` as keys of the open map.
+void emit_relation_errors(YAML::Emitter& y, const RelationErrors& r) {
+  y << YAML::Key << "given" << YAML::Value << r.total;
+  y << YAML::Key << "matched" << YAML::Value << r.matched;
+  auto mean_std = [&](const char* key, const MeanStd& m) {
+    y << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean" << YAML::Value
+      << m.mean << YAML::Key << "std" << YAML::Value << m.std << YAML::EndMap;
+  };
+  mean_std("translation_m", r.translation);
+  mean_std("translation_squared_m2", r.translation_sq);
+  mean_std("rotation_deg", r.rotation_deg);
+  mean_std("rotation_squared_deg2", r.rotation_sq_deg);
+}
+
+/// "ATE RMSE 0.059 m (median 0.029, max 0.226), final error 0.024 m / 0.20 deg"
+void print_trajectory_errors(std::ostream& os, const TrajectoryErrors& e) {
+  os << "ATE RMSE " << e.ate_rmse << " m (median " << e.ate_median << ", max " << e.ate_max << "), final error "
+     << e.final_translation << " m";
+  if (e.final_heading) os << " / " << std::setprecision(2) << *e.final_heading * kRadToDeg << " deg";
+  os << std::setprecision(3);
+}
+
+/// "translation 0.020 ± 0.024 m, rotation 0.45 ± 0.61 deg"
+void print_relation_errors(std::ostream& os, const RelationErrors& r) {
+  os << "translation " << r.translation.mean << " ± " << r.translation.std << " m, rotation " << std::setprecision(2)
+     << r.rotation_deg.mean << " ± " << r.rotation_deg.std << " deg" << std::setprecision(3);
+}
+
 void emit_vector(YAML::Emitter& y, const Eigen::VectorXd& v) {
   y << YAML::Flow << YAML::BeginSeq;
   for (Eigen::Index i = 0; i < v.size(); ++i) y << v[i];
@@ -162,13 +201,22 @@ RunSummary summarize(const Slam& slam, double wall_seconds) {
   } catch (const std::exception& e) {  // a broken estimator: the summary must still be written
     s.final_covariance_problem = e.what();
   }
-  if (!slam.config().evaluation.relations.empty())
-    s.relations = evaluate_relations(traj, read_relations(slam.config().evaluation.relations),
-                                     slam.config().evaluation.relations_max_dt);
+  // Reference poses are paired with the estimate interpolated at their time,
+  // as long as the estimate has poses less than a second apart.
+  constexpr double kMaxGap = 1.0;
+  const bool baseline = slam.odometry_steps() > 0;
+  if (baseline && (!slam.ground_truth().empty() || !slam.config().evaluation.relations.empty()))
+    s.dead_reckoning.emplace().odometry = slam.odometry_description();
+  if (!slam.config().evaluation.relations.empty()) {
+    const std::vector<Relation> relations = read_relations(slam.config().evaluation.relations);
+    const double max_dt = slam.config().evaluation.relations_max_dt;
+    s.relations = evaluate_relations(traj, relations, max_dt);
+    if (s.dead_reckoning) s.dead_reckoning->relations = evaluate_relations(slam.dead_reckoning(), relations, max_dt);
+  }
   if (!slam.ground_truth().empty()) {
-    // Reference poses are paired with the estimate interpolated at their
-    // time, as long as the estimate has poses less than a second apart.
-    s.errors = evaluate_trajectory(slam.evaluated_trajectory(), slam.ground_truth(), 1.0);
+    s.errors = evaluate_trajectory(slam.evaluated_trajectory(), slam.ground_truth(), kMaxGap);
+    if (s.dead_reckoning)
+      s.dead_reckoning->errors = evaluate_trajectory(slam.dead_reckoning_evaluated(), slam.ground_truth(), kMaxGap);
     const auto& nees = slam.stats().nees;
     double sum = 0.0;
     for (double v : nees) sum += v;
@@ -416,12 +464,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
       << (sensor.empty() ? std::string("trajectory.tum") : "trajectory_" + sensor + ".tum");
     y << YAML::Key << "reference_file" << YAML::Value << "ground_truth.tum";
     y << YAML::Key << "alignment" << YAML::Value << "SE(2), least squares over the compared positions";
-    y << YAML::Key << "poses_compared" << YAML::Value << e.matched;
-    y << YAML::Key << "ate_rmse_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_rmse;
-    y << YAML::Key << "ate_median_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_median;
-    y << YAML::Key << "ate_max_m" << YAML::Value << YAML::DoublePrecision(12) << e.ate_max;
-    y << YAML::Key << "final_translation_error_m" << YAML::Value << e.final_translation;
-    if (e.final_heading) y << YAML::Key << "final_heading_error_deg" << YAML::Value << *e.final_heading * kRadToDeg;
+    emit_trajectory_errors(y, e);
     y << YAML::Key << "mean_robot_nees" << YAML::Value << s.mean_nees;
     y << YAML::Key << "nees_dof" << YAML::Value << s.nees_dof;
     y << YAML::EndMap;
@@ -430,18 +473,26 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     const RelationErrors& r = *s.relations;
     y << YAML::Key << "relations" << YAML::Value << YAML::BeginMap;
     y << YAML::Key << "file" << YAML::Value << slam.config().evaluation.relations;
-    y << YAML::Key << "given" << YAML::Value << r.total;
-    y << YAML::Key << "matched" << YAML::Value << r.matched;
-    y << YAML::Key << "translation_m" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
-      << YAML::Value << r.translation.mean << YAML::Key << "std" << YAML::Value << r.translation.std << YAML::EndMap;
-    y << YAML::Key << "translation_squared_m2" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
-      << YAML::Value << r.translation_sq.mean << YAML::Key << "std" << YAML::Value << r.translation_sq.std
-      << YAML::EndMap;
-    y << YAML::Key << "rotation_deg" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
-      << YAML::Value << r.rotation_deg.mean << YAML::Key << "std" << YAML::Value << r.rotation_deg.std << YAML::EndMap;
-    y << YAML::Key << "rotation_squared_deg2" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key << "mean"
-      << YAML::Value << r.rotation_sq_deg.mean << YAML::Key << "std" << YAML::Value << r.rotation_sq_deg.std
-      << YAML::EndMap;
+    emit_relation_errors(y, r);
+    y << YAML::EndMap;
+  }
+  if (s.dead_reckoning) {
+    // The baseline: the same figures for the odometry alone.
+    const RunSummary::DeadReckoning& d = *s.dead_reckoning;
+    y << YAML::Key << "dead_reckoning" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "odometry" << YAML::Value << d.odometry;
+    y << YAML::Key << "how" << YAML::Value
+      << "the source's odometry increments through the motion model from the run's start, no update";
+    if (d.errors) {
+      y << YAML::Key << "ground_truth" << YAML::Value << YAML::BeginMap;
+      emit_trajectory_errors(y, *d.errors);
+      y << YAML::EndMap;
+    }
+    if (d.relations) {
+      y << YAML::Key << "relations" << YAML::Value << YAML::BeginMap;
+      emit_relation_errors(y, *d.relations);
+      y << YAML::EndMap;
+    }
     y << YAML::EndMap;
   }
   y << YAML::EndMap;
@@ -494,16 +545,29 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   os << " (total " << total << " s)\n";
   if (s.errors) {
     const TrajectoryErrors& e = *s.errors;
-    os << "  vs ground truth (" << e.matched << " poses): ATE RMSE " << e.ate_rmse << " m (median " << e.ate_median
-       << ", max " << e.ate_max << "), final error " << e.final_translation << " m";
-    if (e.final_heading) os << " / " << std::setprecision(2) << *e.final_heading * kRadToDeg << " deg";
-    os << std::setprecision(3) << ", mean robot NEES " << s.mean_nees << " (" << s.nees_dof << " dof)\n";
+    os << "  vs ground truth (" << e.matched << " poses): ";
+    print_trajectory_errors(os, e);
+    os << ", mean robot NEES " << s.mean_nees << " (" << s.nees_dof << " dof)\n";
   }
   if (s.relations) {
     const RelationErrors& r = *s.relations;
-    os << "  relations (" << r.matched << " of " << r.total << " matched): translation " << r.translation.mean
-       << " ± " << r.translation.std << " m, rotation " << std::setprecision(2) << r.rotation_deg.mean << " ± "
-       << r.rotation_deg.std << " deg" << std::setprecision(3) << "\n";
+    os << "  relations (" << r.matched << " of " << r.total << " matched): ";
+    print_relation_errors(os, r);
+    os << "\n";
+  }
+  if (s.dead_reckoning) {
+    const RunSummary::DeadReckoning& d = *s.dead_reckoning;
+    os << "  dead reckoning (odometry only; " << d.odometry << "):\n";
+    if (d.errors) {
+      os << "    vs ground truth (" << d.errors->matched << " poses): ";
+      print_trajectory_errors(os, *d.errors);
+      os << "\n";
+    }
+    if (d.relations) {
+      os << "    relations (" << d.relations->matched << " of " << d.relations->total << " matched): ";
+      print_relation_errors(os, *d.relations);
+      os << "\n";
+    }
   }
   for (const SensorHealthReport& h : slam.sensor_health()) {
     os << "  sensor " << h.sensor << ": " << h.measurements << " measurements in " << h.readings << " readings, "

@@ -32,6 +32,15 @@ struct RunSummary {
   double mean_nees = 0.0;
   int nees_dof = 0;
   std::optional<RelationErrors> relations;  ///< when the configuration names a relations file
+  /// The dead-reckoning baseline (Slam::dead_reckoning()) measured the same
+  /// way as the estimate, when the source gave odometry: against the ground
+  /// truth and the relations, whichever the run has.
+  struct DeadReckoning {
+    std::string odometry;  ///< Slam::odometry_description()
+    std::optional<TrajectoryErrors> errors;
+    std::optional<RelationErrors> relations;
+  };
+  std::optional<DeadReckoning> dead_reckoning;
   std::size_t skipped_records = 0;          ///< malformed input records the source skipped
   /// Empty for a complete run; else e.g. "interrupted at step 20000 of 73159 (SIGINT)".
   std::string interrupted;

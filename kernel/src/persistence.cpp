@@ -999,8 +999,7 @@ std::vector<RestoredFeature> restore_features(const StoredMap& map, const std::f
                              "restore() gave M-space dimension " + std::to_string(feature->mspace_dim()) +
                                  ", the file says " + std::to_string(f.saved.mspace_dim),
                              f.id, stored.plugin);
-    auto library = type.library;
-    out.push_back({f.id, slot, std::shared_ptr<Feature>(feature.release(), [library](Feature* p) { delete p; })});
+    out.push_back({f.id, slot, type.adopt(std::move(feature), f.id)});
   }
   return out;
 }

@@ -13,6 +13,7 @@
 
 #include "chi2.hpp"
 #include "logging.hpp"
+#include "mspace/feature_log.hpp"
 #include "mspace/transform.hpp"
 #include "problem.hpp"
 
@@ -88,6 +89,22 @@ struct Slam::ReadingWork {
   std::vector<bool> may_create;  ///< per measurement: far from every feature
 };
 
+std::shared_ptr<Feature> FeatureTypeSlot::adopt(std::unique_ptr<Feature> feature, std::int64_t id) const {
+  if (!feature) return nullptr;
+  if (!log)  // tools and tests without the type's logger: feature_log() drops everything
+    return std::shared_ptr<Feature>(feature.release(), [library = library](Feature* p) { delete p; });
+  std::string prefix = "#";  // appended piecewise: GCC 12 -Wrestrict misfires on "#" + std::to_string(id)
+  prefix.append(std::to_string(id)).append(": ");
+  std::shared_ptr<Logger> prefixed = make_prefixed_logger(log, std::move(prefix));
+  attach_feature_log(*feature, prefixed.get());
+  // The deleter owns what the feature refers to, its plugin library and its
+  // logger, and detaches the logger first (the address may be reused).
+  return std::shared_ptr<Feature>(feature.release(), [library = library, prefixed](Feature* p) {
+    attach_feature_log(*p, nullptr);
+    delete p;
+  });
+}
+
 Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     : config_(config),
       log_(make_instance_logger("slam")),
@@ -111,6 +128,7 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     slot.instance = fc.instance;
     slot.plugin = fc.plugin;
     slot.type = make(fc, PluginKind::Feature, static_cast<FeatureType*>(nullptr), slot.library);
+    slot.log = plugin_loggers_.back();
     types_.push_back(std::move(slot));
   }
   for (const SensorConfig& sc : config_.sensors) {
@@ -279,6 +297,7 @@ bool Slam::relinearize(bool end_of_data) {
 
 void Slam::predict(const DataStep& data) {
   const double dt = started_ ? data.t - t_ : 0.0;
+  if (!started_) dead_reckoning_pose_ = x_r_;  // the baseline starts where the run starts
   started_ = true;
   t_ = data.t;
   if (data.odometry.size() == 0) {
@@ -316,6 +335,14 @@ void Slam::predict(const DataStep& data) {
                         std::to_string(pred.C_d.rows()) + " x " + std::to_string(pred.C_d.cols()));
     pred.C_d = C_data;
   }
+
+  // The dead-reckoning baseline: the same increment through the same model, never updated.
+  const Pose6 dead_reckoning = guarded(config_.motion.instance, *motion_lib_, "predict", [&] {
+    return motion_->predict(dead_reckoning_pose_, data.odometry, dt).pose;
+  });
+  require_finite(dead_reckoning, "dead-reckoning pose", config_.motion.instance, *motion_lib_);
+  dead_reckoning_pose_ = dead_reckoning;
+  ++odometry_steps_;
 
   const Pose6 delta = pose_difference(pred.pose, x_r_);
   path_distance_ += delta.head<3>().norm() + kRotationWeightMetresPerRadian * delta.tail<3>().norm();
@@ -585,8 +612,7 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
         MapFeature mf;
         mf.id = next_feature_id_++;
         mf.type = type_index;
-        auto library = type.library;
-        mf.feature = std::shared_ptr<Feature>(created.release(), [library](Feature* p) { delete p; });
+        mf.feature = type.adopt(std::move(created), mf.id);
         mf.created_step = step_;
         mf.last_seen_step = step_;
         mf.created_path = mf.last_seen_path = path_distance_;
@@ -828,8 +854,24 @@ void Slam::prune_tentative() {
   stats_.pruned += static_cast<std::int64_t>(before - features_.size());
 }
 
+std::vector<StampedPose> Slam::dead_reckoning_evaluated() const {
+  if (ground_truth_sensor_ < 0) return dead_reckoning_;
+  std::vector<StampedPose> out = dead_reckoning_;
+  for (StampedPose& p : out) p.pose = compound(p.pose, sensors_[ground_truth_sensor_].config.mount);
+  return out;
+}
+
+std::string Slam::odometry_description() const {
+  std::string text = "source plugin '" + config_.source.plugin + "'";
+  const Params& params = config_.source.params;
+  if (params.has("odometry") && std::holds_alternative<std::string>(params.values().at("odometry")))
+    text += ", odometry: " + params.get_string("odometry");
+  return text;
+}
+
 void Slam::record(const DataStep& data) {
   trajectory_.push_back({data.t, x_r_, kAllPoseCoords});
+  dead_reckoning_.push_back({data.t, dead_reckoning_pose_, kAllPoseCoords});
   record_path_.push_back(path_distance_);
   // The frame the ground truth refers to: the robot, or a sensor on it
   // (e.g. a GPS antenna mounted with the laser), x_r ⊕ x_rs (eq. 17).

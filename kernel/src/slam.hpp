@@ -69,6 +69,13 @@ struct FeatureTypeSlot {
   std::string plugin;
   std::shared_ptr<const LoadedPlugin> library;
   std::shared_ptr<FeatureType> type;
+  std::shared_ptr<Logger> log;  ///< the instance's logger, shared by its features
+
+  /// Takes a feature this type made (create() or restore()): the result keeps
+  /// the plugin library loaded while it lives, and feature_log() of the
+  /// feature (mspace/feature_log.hpp) writes through the instance's logger
+  /// with "#<id>: " in front.
+  std::shared_ptr<Feature> adopt(std::unique_ptr<Feature> feature, std::int64_t id) const;
 };
 
 struct SensorSlot {
@@ -174,6 +181,20 @@ class Slam {
   /// The poses compared with the ground truth: the robot's, or those of
   /// evaluation.ground_truth_sensor.
   const std::vector<StampedPose>& evaluated_trajectory() const { return evaluated_; }
+  /// The dead-reckoning baseline: the source's odometry increments integrated
+  /// through the motion model from the same start, with no update (one pose
+  /// per step, robot frame; steps without odometry keep the pose).
+  const std::vector<StampedPose>& dead_reckoning() const { return dead_reckoning_; }
+  /// Steps that carried an odometry increment (0: the source gives none, and
+  /// there is no baseline).
+  std::int64_t odometry_steps() const { return odometry_steps_; }
+  /// The same poses in the frame the ground truth refers to (as
+  /// evaluated_trajectory()).
+  std::vector<StampedPose> dead_reckoning_evaluated() const;
+  /// Which odometry the baseline integrates: the source's plugin, and the
+  /// value of its `odometry` parameter when it has one (a source that offers
+  /// several, e.g. wheel or scan_matched, names the choice there).
+  std::string odometry_description() const;
   const std::vector<MapFeature>& features() const { return features_; }
   const std::vector<SharedCoordinate>& shared_coordinates() const { return shared_; }
   const std::vector<FeatureTypeSlot>& feature_types() const { return types_; }
@@ -291,6 +312,9 @@ class Slam {
   std::vector<StampedPose> trajectory_;
   std::vector<StampedPose> ground_truth_;
   std::vector<StampedPose> evaluated_;
+  Pose6 dead_reckoning_pose_ = Pose6::Zero();  ///< odometry only (predict(), without updates)
+  std::vector<StampedPose> dead_reckoning_;
+  std::int64_t odometry_steps_ = 0;
   int ground_truth_sensor_ = -1;
   /// The robot's true pose at this step, when the ground truth gives all of
   /// its estimated coordinates (for the noise statistics of sensor_health.hpp).

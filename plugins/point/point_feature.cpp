@@ -9,6 +9,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "mspace/feature_log.hpp"
 #include "mspace/pose.hpp"
 #include "mspace/saved_state.hpp"
 #include "mspace/transform.hpp"
@@ -600,6 +601,8 @@ std::optional<Extension> PointFeature::extend_from_range_bearing(const SensorVie
   // (B = I), its x and y without (B = [I₂ 0], z stays in the scan plane).
   const placement::Placement bp = place_observation(latest);
   x_ = bp.x_f;
+  feature_log(*this).debug("placed from the newest of ", num_observations(), " observations, ", latest.v[0],
+                           " m away", latest.planar() ? " (planar: x, y only)" : "");
   Extension ext = placement::full_extension(bp, covariance_of(latest), latest.view.sensor);
   if (latest.planar()) {
     ext.new_dims = kPlanarDim;
@@ -627,6 +630,7 @@ std::optional<Extension> PointFeature::extend_elevation(const SensorView& last_v
   if (!(variance > 0.0)) return std::nullopt;
   ext.C_new = Eigen::MatrixXd::Constant(1, 1, variance);
   x_[2] = h->z;
+  feature_log(*this).debug("height ", h->z, " m (sigma ", std::sqrt(variance), ") from an elevation");
   return ext;
 }
 
@@ -640,6 +644,8 @@ std::optional<Extension> PointFeature::extend_from_rays(const SensorView& last_v
   // triangulation's covariance, so C_new = C_tri (B = I: δx_p = δp).
   const placement::Placement attached = attach_to_camera(t->point, last_view.x_ms);
   x_ = attached.x_f;
+  feature_log(*this).debug("triangulated from ", rays.size(), " rays, parallax ",
+                           max_parallax(rays) * 180.0 / std::numbers::pi, " deg, nearest depth ", t->min_depth, " m");
   return placement::full_extension(attached, to_camera_frame(attached, t->covariance), last_view.sensor);
 }
 

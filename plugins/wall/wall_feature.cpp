@@ -9,6 +9,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "mspace/feature_log.hpp"
 #include "mspace/measurements/line_segment2d.hpp"
 #include "mspace/pose.hpp"
 #include "mspace/saved_state.hpp"
@@ -497,6 +498,9 @@ std::optional<Extension> WallFeature::extend_line() {
   ext.J_sensor = J_s;
   ext.J_own = Eigen::MatrixXd(2, 0);
   ext.C_new = symmetric(J_v * latest.C_v.topLeftCorner<2, 2>() * J_v.transpose());
+  feature_log(*this).debug("enters the map as a line: ", observations_.size(), " observations, ", total,
+                           " points, ", std::sqrt(std::max(0.0, eig.eigenvalues()[0])), " m across it, ",
+                           geometry(x_).L, " m long");
   mdim_ = 2;
   anchor_ = wall_centre(x_);  // eq. 14 about the centre at this moment
   gating_cov_.setZero();
@@ -518,6 +522,8 @@ std::optional<Extension> WallFeature::extend_ends() {
     if (static_cast<int>(tau.size()) < config_.min_end_observations) continue;
     const auto [lo, hi] = std::minmax_element(tau.begin(), tau.end());
     if (*hi - *lo > 2.0 * config_.max_end_spread) continue;
+    feature_log(*this).debug(e == kStart ? "start" : "end", " point fixed: seen as real ", tau.size(),
+                             " times within ", *hi - *lo, " m along the wall");
     add.push_back(e);
   }
   if (add.empty()) return std::nullopt;

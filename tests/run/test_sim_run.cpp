@@ -99,6 +99,76 @@ TEST_F(SimRun, DefaultRunMeetsAccuracyBoundsAndBeatsDeadReckoning) {
       << "dead reckoning ATE " << odo.summary.errors->ate_rmse << " m, SLAM " << e.ate_rmse << " m";
 }
 
+// The summary's dead-reckoning baseline, against a known answer: the
+// simulator's odometry integrated here, independently of the kernel and of
+// the motion model (planar increments (dx, dy, dθ) in the robot frame), gives
+// the same poses to rounding and so the same ATE; and a run without any
+// sensor — a pure prediction, whose estimate *is* dead reckoning — reports
+// the same figures for its estimate and its baseline.
+TEST_F(SimRun, SummaryReportsTheDeadReckoningBaseline) {
+  RunConfig c = config();
+  c.max_steps = 3000;
+  Slam slam(c, registry_);
+  RunOptions options;
+  options.progress = false;
+  options.write_outputs = true;
+  const RunResult result = run_to_end(slam, options);
+  ASSERT_TRUE(result.summary.dead_reckoning.has_value());
+  const RunSummary::DeadReckoning& dr = *result.summary.dead_reckoning;
+  EXPECT_EQ(dr.odometry, "source plugin 'sim_world'");
+  ASSERT_TRUE(dr.errors.has_value());
+  EXPECT_FALSE(dr.relations.has_value());  // sim_points names no relations file
+
+  // The odometry, integrated by the test from the source's own steps.
+  const std::shared_ptr<DataSource> source = registry_.create<DataSource>(
+      c.source.plugin, PluginKind::Source, PluginArgs{c.source.instance, c.source.params, nullptr});
+  Pose6 x = source->initial_pose();
+  std::vector<StampedPose> integrated, truth;
+  DataStep step;
+  while (static_cast<std::int64_t>(integrated.size()) < c.max_steps && source->next(step)) {
+    if (step.odometry.size() == 3) {
+      const double ct = std::cos(x[kTheta]), st = std::sin(x[kTheta]);
+      x[kX] += ct * step.odometry[0] - st * step.odometry[1];
+      x[kY] += st * step.odometry[0] + ct * step.odometry[1];
+      x[kTheta] = std::remainder(x[kTheta] + step.odometry[2], 2.0 * std::numbers::pi);
+    }
+    integrated.push_back({step.t, x, kAllPoseCoords});
+    if (step.ground_truth) truth.push_back({step.t, *step.ground_truth, step.ground_truth_known});
+    step = DataStep{};
+  }
+  ASSERT_EQ(integrated.size(), slam.dead_reckoning().size());
+  double worst = 0.0;
+  for (std::size_t i = 0; i < integrated.size(); ++i) {
+    ASSERT_EQ(integrated[i].t, slam.dead_reckoning()[i].t);
+    worst = std::max(worst, (integrated[i].pose.head<2>() - slam.dead_reckoning()[i].pose.head<2>()).norm());
+  }
+  EXPECT_LT(worst, 1e-9) << "the kernel's dead reckoning is not the odometry integrated";
+  const TrajectoryErrors expected = evaluate_trajectory(integrated, truth, 1.0);
+  EXPECT_EQ(dr.errors->matched, expected.matched);
+  EXPECT_NEAR(dr.errors->ate_rmse, expected.ate_rmse, 1e-9);
+  EXPECT_NEAR(dr.errors->ate_max, expected.ate_max, 1e-9);
+  EXPECT_NEAR(dr.errors->final_translation, expected.final_translation, 1e-9);
+  // What the baseline is for: the odometry drifts, SLAM does not.
+  ASSERT_TRUE(result.summary.errors.has_value());
+  EXPECT_GT(dr.errors->ate_rmse, 10.0 * result.summary.errors->ate_rmse);
+
+  // summary.yaml and the printed summary carry it.
+  const YAML::Node yaml = YAML::LoadFile((out_ / "summary.yaml").string())["dead_reckoning"];
+  ASSERT_TRUE(yaml) << "summary.yaml has no dead_reckoning";
+  EXPECT_EQ(yaml["odometry"].as<std::string>(), dr.odometry);
+  EXPECT_NEAR(yaml["ground_truth"]["ate_rmse_m"].as<double>(), dr.errors->ate_rmse, 1e-9);
+  const std::string printed = format_summary(result.summary, slam);
+  EXPECT_NE(printed.find("dead reckoning (odometry only; source plugin 'sim_world'):\n    vs ground truth"),
+            std::string::npos)
+      << printed;
+
+  // Without a sensor the estimate is the dead reckoning.
+  const RunResult odo = run(without_sensor(c));
+  ASSERT_TRUE(odo.summary.errors && odo.summary.dead_reckoning && odo.summary.dead_reckoning->errors);
+  EXPECT_NEAR(odo.summary.dead_reckoning->errors->ate_rmse, odo.summary.errors->ate_rmse, 1e-9);
+  EXPECT_NEAR(odo.summary.dead_reckoning->errors->ate_rmse, expected.ate_rmse, 1e-9);
+}
+
 // The health report in a whole run: a sensor whose extractor finds nothing is
 // named in the summary (and the log), and an extractor that claims 10× less
 // noise than the simulated sensor has is flagged as overconfident; the

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "mspace/feature_log.hpp"
 #include "mspace/numeric.hpp"
 #include "mspace/pose.hpp"
 #include "mspace/saved_state.hpp"
@@ -322,6 +323,9 @@ std::optional<Extension> DoorwayFeature::add_width() {
   const Geometry g = geometry(x_);
   x_ = compose(g.c, g.alpha, width_evidence_[0] / width_evidence_[1]);
   mdim_ = 4;
+  mspace::feature_log(*this).debug("width ", width_evidence_[0] / width_evidence_[1], " m from ",
+                                   width_evidence_[2], " observations (sigma ", std::sqrt(1.0 / width_evidence_[1]),
+                                   " m)");
   Extension ext;
   ext.new_dims = 1;
   ext.C_new = Eigen::MatrixXd::Constant(1, 1, 1.0 / width_evidence_[1]);
