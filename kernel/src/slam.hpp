@@ -43,6 +43,7 @@
 namespace mspace::kernel {
 
 class Problem;
+class ConsideredMap;
 struct StoredMap;
 
 /// One feature in the map, as the kernel tracks it: the plugin's feature and
@@ -258,9 +259,10 @@ class Slam {
   /// Discards config_.skip_steps data steps.
   void skip_data_steps();
   bool localizing() const { return config_.map.mode == MapConfig::Mode::Localize; }
-  /// Localize mode: the measurement noise of a match grown by the map's
-  /// uncertainty, C_eta + J_f P_ff J_fᵀ, and the robot's columns only.
-  void consider_map_uncertainty(const MapFeature& mf, LinearizedObservation& o) const;
+  /// Localize mode: one step's observations (robot and map rows) applied as
+  /// Schmidt's consider update (considered_map.hpp): the robot is corrected,
+  /// the map is not, the robot–map cross-covariance is kept. Returns δx_r.
+  Eigen::VectorXd consider_update(const std::vector<LinearizedObservation>& obs);
 
   RunConfig config_;
   std::shared_ptr<Logger> log_;
@@ -320,9 +322,9 @@ class Slam {
   std::optional<MapSessionReport> map_session_;
   /// Loaded features' coordinates and dimensions, by id, to count changes.
   std::unordered_map<int, std::pair<Eigen::VectorXd, int>> loaded_state_;
-  /// Localize: the loaded map's covariance entries, keyed by (row, column)
-  /// of the map's rows (each feature's marginal block; zero elsewhere).
-  std::unordered_map<std::int64_t, double> map_prior_;
+  /// Localize: the loaded map's covariance and the robot's correlation with
+  /// it (the Schmidt update's working set).
+  std::unique_ptr<ConsideredMap> considered_;
 };
 
 }  // namespace mspace::kernel

@@ -369,6 +369,72 @@ TEST(Localize, SimWorldWithOtherNoiseAndThreeTimesTheOdometryNoise) {
   EXPECT_FALSE(fs::exists(fs::path(c.output.dir) / "map.bin"));
 }
 
+/// The simulated world of sim_points laid out by `world` (world_seed), noise
+/// seed `seed`, the odometry noise × `scale`.
+std::function<void(RunConfig&)> sim_world_of(std::int64_t world, std::int64_t seed, double scale) {
+  return [=](RunConfig& c) {
+    sim_world(seed, scale)(c);
+    c.source.params.set("world_seed", world);
+  };
+}
+
+/// A mapping run of world `world` (noise seed `world`) and a localize run in
+/// its map (noise seed 100 + world, 3× the odometry noise): their ATE and the
+/// localize run's mean robot NEES.
+struct WorldFigures {
+  double mapping_ate = 0.0, localize_ate = 0.0, localize_nees = 0.0;
+  int nees_dof = 0;
+};
+WorldFigures map_and_localize(std::int64_t world, int working_set_rows) {
+  const fs::path map_dir = scratch("world_" + std::to_string(world));
+  WorldFigures f;
+  {
+    PluginRegistry registry;
+    Slam slam(load("sim_points.yaml", "ekf", registry, map_dir, 0, sim_world_of(world, world, 1.0)), registry);
+    const RunResult r = run_to_end(slam, quiet());
+    if (r.summary.errors) f.mapping_ate = r.summary.errors->ate_rmse;
+  }
+  PluginRegistry registry;
+  RunConfig c =
+      load("sim_points.yaml", "ekf", registry, scratch("world_localize"), 0, sim_world_of(world, 100 + world, 3.0));
+  c.map.load = map_dir.string();
+  c.map.mode = MapConfig::Mode::Localize;
+  c.map.working_set_rows = working_set_rows;
+  Slam slam(c, registry);
+  const RunResult r = run_to_end(slam, quiet());
+  if (r.summary.errors) f.localize_ate = r.summary.errors->ate_rmse;
+  f.localize_nees = r.summary.mean_nees;
+  f.nees_dof = r.summary.nees_dof;
+  return f;
+}
+
+// The Schmidt update keeps the robot's covariance honest: over ten simulated
+// worlds (each mapped with its own noise, localized in with other noise and
+// 3× the odometry noise) the average of the runs' mean robot NEES lies in the
+// two-sided 95 % band of a χ² average over 10 runs of 3 dof,
+// [χ²₀.₀₂₅(30)/10, χ²₀.₉₇₅(30)/10] = [1.679, 4.698] (Bar-Shalom's ANEES test),
+// and every localize run's ATE is no worse than its mapping run's. (The
+// marginal-as-noise update of before gave a mean NEES of 44.8 in world 1.)
+TEST(Localize, ConsistentOverTenSimulatedWorlds) {
+  set_log_level(LogLevel::Warn);
+  constexpr int kWorlds = 10;
+  double sum_nees = 0.0;
+  for (int world = 1; world <= kWorlds; ++world) {
+    const WorldFigures f = map_and_localize(world, MapConfig{}.working_set_rows);
+    std::cout << "[ consistent ] world " << world << ": mapping ATE " << f.mapping_ate << " m, localize ATE "
+              << f.localize_ate << " m, localize mean NEES " << f.localize_nees << " (" << f.nees_dof << " dof)\n";
+    EXPECT_EQ(f.nees_dof, 3);
+    EXPECT_GT(f.localize_ate, 0.0);
+    EXPECT_LE(f.localize_ate, f.mapping_ate) << "world " << world;
+    sum_nees += f.localize_nees;
+  }
+  const double anees = sum_nees / kWorlds;
+  std::cout << "[ consistent ] average of the mean NEES over " << kWorlds << " worlds: " << anees
+            << " (band 1.679 .. 4.698)\n";
+  EXPECT_GE(anees, 1.679);
+  EXPECT_LE(anees, 4.698);
+}
+
 /// The run of the data after its first `first` steps (of `steps`), in `mode`
 /// in the map of a run of those first steps, starting where that run ended.
 RunConfig second_session(const std::string& config, const std::string& estimator, PluginRegistry& registry,
