@@ -162,10 +162,26 @@ int ConsideredMap::enter(int row, std::int64_t step, const std::vector<int>& kee
   }
   const auto col = static_cast<Eigen::Index>(rows_.size());
   if (col >= P_rW_.cols()) P_rW_.conservativeResize(Eigen::NoChange, col + 1);  // one step observes more than capacity
-  // A row enters uncorrelated with the robot: exact when it was never
-  // observed (and the map's rows are uncorrelated with it, or were never
-  // observed either), the working set's approximation otherwise.
+  // A row enters with the correlation with the robot that it has through the
+  // rows U of W its own blocks correlate it with (another coordinate of the
+  // same feature): P_rc = P_rU P_UU⁻¹ P_Uc, i.e. the robot and the row are
+  // taken as independent given U. That keeps the whole covariance valid
+  // (positive semi-definite); it is exact for a row never observed whose
+  // feature's other rows were never observed either (P_rc = 0).
   P_rW_.col(col).setZero();
+  if (const auto it = neighbours_.find(row); it != neighbours_.end()) {
+    std::vector<int> U;
+    for (const auto& [r, v] : it->second)
+      if (r != row && column_of_.count(r) != 0) U.push_back(r);
+    if (!U.empty()) {
+      const Eigen::LDLT<Eigen::MatrixXd> P_UU(map_block(U, U));
+      if (P_UU.info() == Eigen::Success && (P_UU.vectorD().array() > 0.0).all()) {
+        Eigen::MatrixXd P_rU(k_, static_cast<Eigen::Index>(U.size()));
+        for (std::size_t j = 0; j < U.size(); ++j) P_rU.col(static_cast<Eigen::Index>(j)) = P_rW_.col(column_of_.at(U[j]));
+        P_rW_.col(col) = P_rU * P_UU.solve(map_block(U, {row}));
+      }
+    }
+  }
   rows_.push_back(row);
   last_used_.push_back(step);
   column_of_[row] = static_cast<int>(col);

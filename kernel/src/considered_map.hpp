@@ -14,9 +14,10 @@
 // model: each feature's own block (shared rows included), no correlation
 // between features; then only observed rows get correlated with the robot, and
 // a bounded working set W holds them (the `capacity` most recently observed).
-// A row leaving W forgets its correlation with the robot — the one
-// approximation (none while W holds every row observed); it keeps the joint
-// covariance valid (the row re-enters uncorrelated with everything in W).
+// A row leaving W forgets its own correlation with the robot — the one
+// approximation (none while W holds every row observed); when it is observed
+// again it re-enters with the correlation it has through the rows of its
+// feature still in W, which keeps the joint covariance valid.
 // Every step costs O(k·|W| + m·|W|), whatever the map's size.
 #pragma once
 
