@@ -258,6 +258,18 @@ LinearizedObservation ConsideredMap::condition(const std::vector<LinearizedObser
   return out;
 }
 
+StateAugmentation ConsideredMap::as_augmentation(const Eigen::MatrixXd& P_rr, const Eigen::MatrixXd& P_mm) const {
+  Eigen::MatrixXd P_rm = Eigen::MatrixXd::Zero(k_, rows_in_map_);
+  for (std::size_t c = 0; c < rows_.size(); ++c) P_rm.col(rows_[c] - k_) = P_rW_.col(static_cast<Eigen::Index>(c));
+  StateAugmentation aug;
+  aug.idx.resize(static_cast<std::size_t>(k_));
+  for (int i = 0; i < k_; ++i) aug.idx[static_cast<std::size_t>(i)] = i;
+  aug.J = (psd_pseudo_inverse(P_rr) * P_rm).transpose();  // P_mr P_rr⁻¹
+  const Eigen::MatrixXd C = P_mm - aug.J * P_rm;
+  aug.C_new = 0.5 * (C + C.transpose());
+  return aug;
+}
+
 void ConsideredMap::commit() {
   const Eigen::Index nW = G_.cols();
   if (K_r_.size() == 0 || nW == 0) return;

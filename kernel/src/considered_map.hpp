@@ -59,10 +59,16 @@ class ConsideredMap {
                                   std::int64_t step);
   /// After the estimator applied condition()'s observation: P_rW −= K_r (H P)_W.
   void commit();
+  /// The map's rows as new estimator rows behind the robot's, correlated with
+  /// it as now: δx_m = P_mr P_rr⁻¹ δx_r + w, w ~ N(0, P_mm − P_mr P_rr⁻¹ P_rm),
+  /// with P_mm the map's joint covariance (rows × rows). For a switch to mapping.
+  StateAugmentation as_augmentation(const Eigen::MatrixXd& P_rr, const Eigen::MatrixXd& P_mm) const;
 
   int working_rows() const { return static_cast<int>(rows_.size()); }
   int capacity() const { return capacity_; }
   std::int64_t evicted() const { return evicted_; }
+  /// True when P_mm is the map's joint covariance, false for the block model.
+  bool joint() const { return joint_ != nullptr; }
 
  private:
   /// The map's covariance between map rows a and b (state indices).

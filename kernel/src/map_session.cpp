@@ -87,9 +87,13 @@ void Slam::load_map() {
   MapSessionReport report;
   report.file = file.string();
   if (localize) {
+    if (config_.map.extend_when_unmapped > 0.0 && !cov.joint)
+      throw fail("map.extend_when_unmapped needs the joint covariance of the map (to map on from it), and this map "
+                 "holds only each feature's marginal (saved with output.map_covariance: marginal)");
     std::shared_ptr<const Eigen::MatrixXd> joint;
     if (cov.joint)  // the map's block (the saved robot is not this run's robot)
       joint = std::make_shared<const Eigen::MatrixXd>(cov.joint->bottomRightCorner(cov.rows, cov.rows));
+    if (config_.map.extend_when_unmapped > 0.0) map_joint_ = joint;
     considered_ = std::make_unique<ConsideredMap>(k, cov.rows, std::move(joint), config_.map.working_set_rows);
   }
   std::vector<MapFeature> kept;
@@ -185,10 +189,41 @@ Eigen::VectorXd Slam::consider_update(const std::vector<LinearizedObservation>& 
   return dx;
 }
 
+void Slam::watch_for_unmapped(bool matched) {
+  if (matched || step_ == 1) last_matched_path_ = path_distance_;
+  if (path_distance_ - last_matched_path_ < config_.map.extend_when_unmapped) return;
+  // The robot left the map: from now on the run maps on from it (extend). The
+  // map's rows enter the estimator with the covariance the consider update
+  // has kept, δx_m = P_mr P_rr⁻¹ δx_r + w (considered_map.hpp), so the
+  // estimator holds the joint covariance of robot and map as it is now.
+  const StateAugmentation aug = considered_->as_augmentation(checked_marginal(robot_idx_), *map_joint_);
+  const int k = static_cast<int>(robot_idx_.size());
+  const int first =
+      guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
+  if (first != k || estimator_->dim() != k + static_cast<int>(aug.C_new.rows()))
+    throw PluginError(config_.estimator.instance + " (plugin '" + config_.estimator.plugin + "'): put the map's " +
+                      std::to_string(aug.C_new.rows()) + " rows at " + std::to_string(first) + " (expected " +
+                      std::to_string(k) + ")");
+  map_session_->covariance_model = considered_->joint() ? "joint" : "feature blocks";
+  map_session_->working_set_evictions = considered_->evicted();
+  considered_.reset();
+  map_joint_.reset();
+  config_.map.mode = MapConfig::Mode::Extend;
+  map_session_->switched_to_mapping_at_step = step_;
+  map_session_->switched_at_path = path_distance_;
+  associator_.map_changed();
+  log_->info("step ", step_, ": no measurement matched the map over the last ", config_.map.extend_when_unmapped,
+             " m of path: localize switches to mapping (map.extend_when_unmapped)");
+}
+
 std::optional<Slam::MapSessionReport> Slam::map_session_report() const {
   if (!map_session_) return std::nullopt;
   MapSessionReport r = *map_session_;
   r.added = static_cast<int>(stats_.created);
+  if (considered_) {
+    r.covariance_model = considered_->joint() ? "joint" : "feature blocks";
+    r.working_set_evictions = considered_->evicted();
+  }
   std::unordered_map<int, const MapFeature*> now;
   for (const MapFeature& mf : features_) now[mf.id] = &mf;
   for (const auto& [id, state] : loaded_state_) {

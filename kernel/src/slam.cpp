@@ -228,6 +228,8 @@ bool Slam::step() {
 
   std::vector<ReadingWork> work;
   for (const SensorReading& reading : data.readings) process_reading(reading, work);
+  if (localizing() && config_.map.extend_when_unmapped > 0.0)
+    watch_for_unmapped(std::any_of(work.begin(), work.end(), [](const ReadingWork& w) { return !w.matches.empty(); }));
 
   t0 = Clock::now();
   add_dense_information(work);
