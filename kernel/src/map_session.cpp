@@ -5,7 +5,8 @@
 //   mapping   the map starts empty (no file is read);
 //   localize  the map of map.bin is read-only: association matches against it,
 //             the update corrects the robot only, phases 3 and 4 leave the map
-//             alone, nothing is created;
+//             alone, nothing is created; with map.extend_when_unmapped it
+//             becomes an extend session where the robot leaves the map;
 //   extend    the map of map.bin is the start of this run's map: its features
 //             and shared coordinates enter the estimator with the map's joint
 //             covariance and the run maps on (features gain dimensions, new
