@@ -31,7 +31,7 @@ const std::vector<std::string> kTopKeys = {"run",         "source",       "motio
 const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor"};
 const std::vector<std::string> kRunKeys = {"name",       "log_level", "max_steps", "checkpoint_every",
                                            "health_check_every", "plugin_path", "seed", "skip_steps"};
-const std::vector<std::string> kMapKeys = {"load", "mode", "start"};
+const std::vector<std::string> kMapKeys = {"load", "mode", "start", "working_set_rows", "extend_when_unmapped"};
 const std::vector<std::string> kMapModes = {"mapping", "localize", "extend"};
 const std::vector<std::string> kMapStarts = {"config", "map_end"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
@@ -455,6 +455,14 @@ MapConfig Reader::read_map(const Item* item) const {
   constexpr MapConfig::Mode kModes[] = {MapConfig::Mode::Mapping, MapConfig::Mode::Localize, MapConfig::Mode::Extend};
   if (const Item* f = find(fields, "mode")) map.mode = kModes[choice(*f, kMapModes)];
   if (const Item* f = find(fields, "start")) map.start_at_map_end = choice(*f, kMapStarts) == 1;
+  if (const Item* f = find(fields, "working_set_rows"))
+    map.working_set_rows = static_cast<int>(integer(*f, 1, 1 << 20));
+  if (const Item* f = find(fields, "extend_when_unmapped")) {
+    map.extend_when_unmapped = number(*f, 0.0);
+    if (map.extend_when_unmapped > 0.0 && map.mode != MapConfig::Mode::Localize)
+      fail(*f, "extend_when_unmapped switches a localize run to mapping; this run's map.mode is " +
+                   std::string(map_mode_name(map.mode)));
+  }
   std::string problem = map_config_problem(map);
   if (!problem.empty()) fail(*item, problem);
   return map;
@@ -666,6 +674,8 @@ void emit_run(YAML::Emitter& out, const RunConfig& c) {
     if (!c.map.load.empty()) out << YAML::Key << "load" << YAML::Value << c.map.load;
     out << YAML::Key << "mode" << YAML::Value << map_mode_name(c.map.mode);
     out << YAML::Key << "start" << YAML::Value << (c.map.start_at_map_end ? "map_end" : "config");
+    out << YAML::Key << "working_set_rows" << YAML::Value << c.map.working_set_rows;
+    out << YAML::Key << "extend_when_unmapped" << YAML::Value << c.map.extend_when_unmapped;
     out << YAML::EndMap;
   }
 }

@@ -170,6 +170,14 @@ struct MapConfig {
   /// The robot starts where the map's run ended (its last pose) instead of at
   /// initial_pose / the source's initial pose.
   bool start_at_map_end = false;
+  /// Localize: the map rows whose correlation with the robot is kept (the
+  /// Schmidt update's working set, kernel/src/considered_map.hpp): the
+  /// least recently observed beyond this many forget it.
+  int working_set_rows = 512;
+  /// Localize: after this many metres of path (kernel path distance) with no
+  /// measurement matching the map, switch to mapping (extend) for the rest
+  /// of the run; 0 = never (docs/maps.md §2).
+  double extend_when_unmapped = 0.0;
 };
 
 const char* map_mode_name(MapConfig::Mode mode);

@@ -5,44 +5,35 @@
 //   mapping   the map starts empty (no file is read);
 //   localize  the map of map.bin is read-only: association matches against it,
 //             the update corrects the robot only, phases 3 and 4 leave the map
-//             alone, nothing is created;
+//             alone, nothing is created; with map.extend_when_unmapped it
+//             becomes an extend session where the robot leaves the map;
 //   extend    the map of map.bin is the start of this run's map: its features
 //             and shared coordinates enter the estimator with the map's joint
 //             covariance and the run maps on (features gain dimensions, new
 //             ones enter); the map it writes is one map of both sessions.
 //
-// How localize accounts for the map's uncertainty. The estimator holds the
-// robot's rows only. A feature's own error δx_p (covariance P_ff, its marginal
-// as saved in COVM) enters every observation of it as extra measurement noise:
-// with η ≈ J_r δx_r + J_f δx_p + noise (eq. 30), the update uses
-//     C_η' = C_η + J_f P_ff J_fᵀ
-// and J_r alone — the map's marginal covariances as priors, "considered" but
-// never updated (Schmidt's consider filter without the robot–map cross terms).
-// What this leaves out: the correlation between the robot's error and a
-// feature's after the feature has been used, so a long stay among the same few
-// features makes the robot's covariance optimistic by up to the map's
-// uncertainty. Association gates with the same covariance (robot from the
-// estimator, feature from the map, no cross term). Every step costs what the
-// features in view cost: the spatial index finds them, and no step touches
-// the rest of the map.
+// How localize accounts for the map's uncertainty: Schmidt's consider update
+// (considered_map.cpp). The estimator holds the robot's rows only; the map's
+// rows keep the covariance of the file (the joint one when map.bin holds it,
+// else each feature's marginal) and are never updated, and the robot–map
+// cross-covariance that every update creates is kept for a bounded working
+// set of map rows (map.working_set_rows), so that the map's errors, common to
+// all the features in view and to every pass over them, are not taken as
+// fresh evidence each time. Association gates with the same covariance.
+// Every step costs what the features in view and the working set cost: the
+// spatial index finds the features, and no step touches the rest of the map.
 #include <algorithm>
 #include <cstdint>
 #include <numeric>
 
 #include <Eigen/Cholesky>
 
+#include "considered_map.hpp"
 #include "persistence.hpp"
 #include "problem.hpp"
 #include "slam.hpp"
 
 namespace mspace::kernel {
-namespace {
-
-std::int64_t entry_key(int row, int col) {
-  return (static_cast<std::int64_t>(row) << 32) | static_cast<std::uint32_t>(col);
-}
-
-}  // namespace
 
 std::vector<MapFeature> Slam::restored_features(const StoredMap& map, const std::filesystem::path& file) const {
   std::vector<RestoredFeature> restored = restore_features(map, file, types_);
@@ -96,6 +87,16 @@ void Slam::load_map() {
   }
   MapSessionReport report;
   report.file = file.string();
+  if (localize) {
+    if (config_.map.extend_when_unmapped > 0.0 && !cov.joint)
+      throw fail("map.extend_when_unmapped needs the joint covariance of the map (to map on from it), and this map "
+                 "holds only each feature's marginal (saved with output.map_covariance: marginal)");
+    std::shared_ptr<const Eigen::MatrixXd> joint;
+    if (cov.joint)  // the map's block (the saved robot is not this run's robot)
+      joint = std::make_shared<const Eigen::MatrixXd>(cov.joint->bottomRightCorner(cov.rows, cov.rows));
+    if (config_.map.extend_when_unmapped > 0.0) map_joint_ = joint;
+    considered_ = std::make_unique<ConsideredMap>(k, cov.rows, std::move(joint), config_.map.working_set_rows);
+  }
   std::vector<MapFeature> kept;
   for (std::size_t i = 0; i < features.size(); ++i) {
     MapFeature& mf = features[i];
@@ -111,11 +112,7 @@ void Slam::load_map() {
         ++report.tentative_dropped;
         continue;
       }
-      const Eigen::MatrixXd& P = map.features[i].covariance;
-      for (std::size_t a = 0; a < mf.state_idx.size(); ++a)
-        for (std::size_t b = 0; b < mf.state_idx.size(); ++b)
-          map_prior_[entry_key(mf.state_idx[a], mf.state_idx[b])] =
-              P(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
+      considered_->set_block(mf.state_idx, map.features[i].covariance);
     }
     loaded_state_[mf.id] = {mf.feature->coords(), mf.feature->mspace_dim()};
     kept.push_back(std::move(mf));
@@ -181,48 +178,53 @@ void Slam::skip_data_steps() {
 }
 
 Eigen::MatrixXd Slam::state_covariance(const std::vector<int>& idx) const {
-  if (!localizing()) return estimator_->marginal(idx);
-  // The robot's rows from the estimator, the map's from the loaded map; the
-  // two are uncorrelated (see the top of this file).
-  const int k = static_cast<int>(dofs_.size());
-  const auto n = static_cast<Eigen::Index>(idx.size());
-  Eigen::MatrixXd P = Eigen::MatrixXd::Zero(n, n);
-  std::vector<int> robot;
-  std::vector<Eigen::Index> at;
-  for (Eigen::Index i = 0; i < n; ++i)
-    if (idx[static_cast<std::size_t>(i)] < k) {
-      robot.push_back(idx[static_cast<std::size_t>(i)]);
-      at.push_back(i);
-    }
-  if (!robot.empty()) {
-    const Eigen::MatrixXd R = estimator_->marginal(robot);
-    for (std::size_t a = 0; a < at.size(); ++a)
-      for (std::size_t b = 0; b < at.size(); ++b)
-        P(at[a], at[b]) = R(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
-  }
-  for (Eigen::Index a = 0; a < n; ++a) {
-    if (idx[static_cast<std::size_t>(a)] < k) continue;
-    for (Eigen::Index b = 0; b < n; ++b) {
-      if (idx[static_cast<std::size_t>(b)] < k) continue;
-      const auto it = map_prior_.find(entry_key(idx[static_cast<std::size_t>(a)], idx[static_cast<std::size_t>(b)]));
-      if (it != map_prior_.end()) P(a, b) = it->second;
-    }
-  }
-  return P;
+  if (!considered_) return estimator_->marginal(idx);
+  return considered_->covariance(idx, checked_marginal(robot_idx_));
 }
 
-void Slam::consider_map_uncertainty(const MapFeature& mf, LinearizedObservation& o) const {
-  const auto k = static_cast<Eigen::Index>(robot_idx_.size());
-  const Eigen::MatrixXd J_f = o.J.rightCols(o.J.cols() - k);
-  o.C_eta += J_f * state_covariance(mf.state_idx) * J_f.transpose();  // C_η + J_f P_ff J_fᵀ
-  o.J = o.J.leftCols(k).eval();
-  o.idx = robot_idx_;
+Eigen::VectorXd Slam::consider_update(const std::vector<LinearizedObservation>& obs) {
+  const std::vector<LinearizedObservation> robot_only = {
+      considered_->condition(obs, checked_marginal(robot_idx_), step_)};
+  const Eigen::VectorXd dx = estimator_update(robot_only, "update");
+  considered_->commit();
+  return dx;
+}
+
+void Slam::watch_for_unmapped(bool matched) {
+  if (matched || step_ == 1) last_matched_path_ = path_distance_;
+  if (path_distance_ - last_matched_path_ < config_.map.extend_when_unmapped) return;
+  // The robot left the map: from now on the run maps on from it (extend). The
+  // map's rows enter the estimator with the covariance the consider update
+  // has kept, δx_m = P_mr P_rr⁻¹ δx_r + w (considered_map.hpp), so the
+  // estimator holds the joint covariance of robot and map as it is now.
+  const StateAugmentation aug = considered_->as_augmentation(checked_marginal(robot_idx_), *map_joint_);
+  const int k = static_cast<int>(robot_idx_.size());
+  const int first =
+      guarded(config_.estimator.instance, *estimator_lib_, "augment", [&] { return estimator_->augment(aug); });
+  if (first != k || estimator_->dim() != k + static_cast<int>(aug.C_new.rows()))
+    throw PluginError(config_.estimator.instance + " (plugin '" + config_.estimator.plugin + "'): put the map's " +
+                      std::to_string(aug.C_new.rows()) + " rows at " + std::to_string(first) + " (expected " +
+                      std::to_string(k) + ")");
+  map_session_->covariance_model = considered_->joint() ? "joint" : "feature blocks";
+  map_session_->working_set_evictions = considered_->evicted();
+  considered_.reset();
+  map_joint_.reset();
+  config_.map.mode = MapConfig::Mode::Extend;
+  map_session_->switched_to_mapping_at_step = step_;
+  map_session_->switched_at_path = path_distance_;
+  associator_.map_changed();
+  log_->info("step ", step_, ": no measurement matched the map over the last ", config_.map.extend_when_unmapped,
+             " m of path: localize switches to mapping (map.extend_when_unmapped)");
 }
 
 std::optional<Slam::MapSessionReport> Slam::map_session_report() const {
   if (!map_session_) return std::nullopt;
   MapSessionReport r = *map_session_;
   r.added = static_cast<int>(stats_.created);
+  if (considered_) {
+    r.covariance_model = considered_->joint() ? "joint" : "feature blocks";
+    r.working_set_evictions = considered_->evicted();
+  }
   std::unordered_map<int, const MapFeature*> now;
   for (const MapFeature& mf : features_) now[mf.id] = &mf;
   for (const auto& [id, state] : loaded_state_) {

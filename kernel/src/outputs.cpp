@@ -346,6 +346,14 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
       y << YAML::Key << "tentative_features_not_used" << YAML::Value << m->tentative_dropped;
     y << YAML::Key << "features_added" << YAML::Value << m->added;
     y << YAML::Key << "features_changed" << YAML::Value << m->changed;
+    if (!m->covariance_model.empty()) {
+      y << YAML::Key << "covariance_model" << YAML::Value << m->covariance_model;
+      y << YAML::Key << "working_set_evictions" << YAML::Value << m->working_set_evictions;
+    }
+    if (m->switched_to_mapping_at_step > 0) {
+      y << YAML::Key << "switched_to_mapping_at_step" << YAML::Value << m->switched_to_mapping_at_step;
+      y << YAML::Key << "switched_at_path_m" << YAML::Value << m->switched_at_path;
+    }
   }
   y << YAML::EndMap;
   y << YAML::Key << "counts" << YAML::Value << YAML::BeginMap;
@@ -511,7 +519,12 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   if (!s.interrupted.empty()) os << "  " << s.interrupted << "\n";
   if (const auto m = slam.map_session_report())
     os << "  map mode " << map_mode_name(slam.map_mode()) << " in " << m->file << ": " << m->loaded
-       << " features loaded, " << m->added << " added, " << m->changed << " changed\n";
+       << " features loaded, " << m->added << " added, " << m->changed << " changed"
+       << (m->covariance_model.empty() ? "" : "; map covariance: " + m->covariance_model)
+       << (m->switched_to_mapping_at_step > 0
+               ? "; switched from localize to mapping at step " + std::to_string(m->switched_to_mapping_at_step)
+               : "")
+       << "\n";
   os << "  measurements " << st.measurements << ", matched " << st.matched << ", used in updates " << st.updates
      << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned;
   if (st.joined > 0) os << ", shared coordinates " << st.joined;

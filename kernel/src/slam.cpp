@@ -12,6 +12,7 @@
 #include <Eigen/LU>
 
 #include "chi2.hpp"
+#include "considered_map.hpp"
 #include "logging.hpp"
 #include "mspace/feature_log.hpp"
 #include "mspace/transform.hpp"
@@ -245,6 +246,8 @@ bool Slam::step() {
 
   std::vector<ReadingWork> work;
   for (const SensorReading& reading : data.readings) process_reading(reading, work);
+  if (localizing() && config_.map.extend_when_unmapped > 0.0)
+    watch_for_unmapped(std::any_of(work.begin(), work.end(), [](const ReadingWork& w) { return !w.matches.empty(); }));
 
   t0 = Clock::now();
   add_dense_information(work);
@@ -349,6 +352,7 @@ void Slam::predict(const DataStep& data) {
   x_r_ = pred.pose;
   const Eigen::MatrixXd Q = pred.J_rd * pred.C_d * pred.J_rd.transpose();  // eq. 26
   guarded(config_.estimator.instance, *estimator_lib_, "predict", [&] { estimator_->predict(pred.J_rr, Q); });
+  if (considered_) considered_->predict(pred.J_rr);
 }
 
 // A sensor whose mount the data records (a camera calibration file) must be
@@ -501,12 +505,11 @@ void Slam::update(std::vector<Match>& matches) {
     o.idx = robot_idx_;
     o.idx.insert(o.idx.end(), mf.state_idx.begin(), mf.state_idx.end());
     o.J = c.J_state;
-    if (localizing()) consider_map_uncertainty(mf, o);
     obs.push_back(std::move(o));
   }
   if (obs.empty()) return;
   stats_.updates += static_cast<std::int64_t>(obs.size());
-  const Eigen::VectorXd dx = estimator_update(obs, "update");
+  const Eigen::VectorXd dx = localizing() ? consider_update(obs) : estimator_update(obs, "update");
 
   if (log_->enabled(LogLevel::Debug)) {
     std::string used;

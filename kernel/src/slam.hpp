@@ -43,6 +43,7 @@
 namespace mspace::kernel {
 
 class Problem;
+class ConsideredMap;
 struct StoredMap;
 
 /// One feature in the map, as the kernel tracks it: the plugin's feature and
@@ -165,6 +166,14 @@ class Slam {
     int tentative_dropped = 0;  ///< localize: tentative features of the file, not used
     int added = 0;     ///< features created in this run
     int changed = 0;   ///< loaded features whose coordinates or M-space dimension differ now
+    /// Localize: the map covariance the consider update uses ("joint" or
+    /// "feature blocks", considered_map.hpp) and how many rows left its working set.
+    std::string covariance_model;
+    std::int64_t working_set_evictions = 0;
+    /// map.extend_when_unmapped: the step at which localize switched to
+    /// mapping (0: it did not) and the path distance then.
+    std::int64_t switched_to_mapping_at_step = 0;
+    double switched_at_path = 0.0;
   };
   /// Empty unless the run loaded a map; `changed` is counted now.
   std::optional<MapSessionReport> map_session_report() const;
@@ -279,9 +288,14 @@ class Slam {
   /// Discards config_.skip_steps data steps.
   void skip_data_steps();
   bool localizing() const { return config_.map.mode == MapConfig::Mode::Localize; }
-  /// Localize mode: the measurement noise of a match grown by the map's
-  /// uncertainty, C_eta + J_f P_ff J_fᵀ, and the robot's columns only.
-  void consider_map_uncertainty(const MapFeature& mf, LinearizedObservation& o) const;
+  /// Localize mode: one step's observations (robot and map rows) applied as
+  /// Schmidt's consider update (considered_map.hpp): the robot is corrected,
+  /// the map is not, the robot–map cross-covariance is kept. Returns δx_r.
+  Eigen::VectorXd consider_update(const std::vector<LinearizedObservation>& obs);
+  /// map.extend_when_unmapped: after this step's association (`matched`: a
+  /// measurement matched the map), switches a localize run to mapping when
+  /// none has for that many metres of path.
+  void watch_for_unmapped(bool matched);
 
   RunConfig config_;
   std::shared_ptr<Logger> log_;
@@ -344,9 +358,13 @@ class Slam {
   std::optional<MapSessionReport> map_session_;
   /// Loaded features' coordinates and dimensions, by id, to count changes.
   std::unordered_map<int, std::pair<Eigen::VectorXd, int>> loaded_state_;
-  /// Localize: the loaded map's covariance entries, keyed by (row, column)
-  /// of the map's rows (each feature's marginal block; zero elsewhere).
-  std::unordered_map<std::int64_t, double> map_prior_;
+  /// Localize: the loaded map's covariance and the robot's correlation with
+  /// it (the Schmidt update's working set).
+  std::unique_ptr<ConsideredMap> considered_;
+  /// map.extend_when_unmapped: the map's joint covariance (the switch puts it
+  /// in the estimator) and the path distance of the last step that matched.
+  std::shared_ptr<const Eigen::MatrixXd> map_joint_;
+  double last_matched_path_ = 0.0;
 };
 
 }  // namespace mspace::kernel

@@ -24,6 +24,7 @@
 #include <iostream>
 #include <iterator>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "building_log.hpp"
@@ -369,6 +370,132 @@ TEST(Localize, SimWorldWithOtherNoiseAndThreeTimesTheOdometryNoise) {
   EXPECT_FALSE(fs::exists(fs::path(c.output.dir) / "map.bin"));
 }
 
+/// The simulated world of sim_points laid out by `world` (world_seed), noise
+/// seed `seed`, the odometry noise × `scale`.
+std::function<void(RunConfig&)> sim_world_of(std::int64_t world, std::int64_t seed, double scale) {
+  return [=](RunConfig& c) {
+    sim_world(seed, scale)(c);
+    c.source.params.set("world_seed", world);
+  };
+}
+
+/// A mapping run of world `world` (noise seed `world`) and a localize run in
+/// its map (noise seed 100 + world, 3× the odometry noise): their ATE and the
+/// localize run's mean robot NEES.
+struct WorldFigures {
+  double mapping_ate = 0.0, localize_ate = 0.0, localize_nees = 0.0;
+  int nees_dof = 0;
+};
+WorldFigures map_and_localize(std::int64_t world, int working_set_rows) {
+  const fs::path map_dir = scratch("world_" + std::to_string(world));
+  WorldFigures f;
+  {
+    PluginRegistry registry;
+    Slam slam(load("sim_points.yaml", "ekf", registry, map_dir, 0, sim_world_of(world, world, 1.0)), registry);
+    const RunResult r = run_to_end(slam, quiet());
+    if (r.summary.errors) f.mapping_ate = r.summary.errors->ate_rmse;
+  }
+  PluginRegistry registry;
+  RunConfig c =
+      load("sim_points.yaml", "ekf", registry, scratch("world_localize"), 0, sim_world_of(world, 100 + world, 3.0));
+  c.map.load = map_dir.string();
+  c.map.mode = MapConfig::Mode::Localize;
+  c.map.working_set_rows = working_set_rows;
+  Slam slam(c, registry);
+  const RunResult r = run_to_end(slam, quiet());
+  if (r.summary.errors) f.localize_ate = r.summary.errors->ate_rmse;
+  f.localize_nees = r.summary.mean_nees;
+  f.nees_dof = r.summary.nees_dof;
+  return f;
+}
+
+// The Schmidt update keeps the robot's covariance honest: over ten simulated
+// worlds (each mapped with its own noise, localized in with other noise and
+// 3× the odometry noise) the average of the runs' mean robot NEES lies in the
+// two-sided 95 % band of a χ² average over 10 runs of 3 dof,
+// [χ²₀.₀₂₅(30)/10, χ²₀.₉₇₅(30)/10] = [1.679, 4.698] (Bar-Shalom's ANEES test),
+// and every localize run's ATE is no worse than its mapping run's. (The
+// marginal-as-noise update of before gave a mean NEES of 44.8 in world 1.)
+TEST(Localize, ConsistentOverTenSimulatedWorlds) {
+  set_log_level(LogLevel::Warn);
+  constexpr int kWorlds = 10;
+  double sum_nees = 0.0;
+  for (int world = 1; world <= kWorlds; ++world) {
+    const WorldFigures f = map_and_localize(world, MapConfig{}.working_set_rows);
+    std::cout << "[ consistent ] world " << world << ": mapping ATE " << f.mapping_ate << " m, localize ATE "
+              << f.localize_ate << " m, localize mean NEES " << f.localize_nees << " (" << f.nees_dof << " dof)\n";
+    EXPECT_EQ(f.nees_dof, 3);
+    EXPECT_GT(f.localize_ate, 0.0);
+    EXPECT_LE(f.localize_ate, f.mapping_ate) << "world " << world;
+    sum_nees += f.localize_nees;
+  }
+  const double anees = sum_nees / kWorlds;
+  std::cout << "[ consistent ] average of the mean NEES over " << kWorlds << " worlds: " << anees
+            << " (band 1.679 .. 4.698)\n";
+  EXPECT_GE(anees, 1.679);
+  EXPECT_LE(anees, 4.698);
+}
+
+/// Estimated (dimension > 0) features of a run.
+int estimated_features(const Slam& slam) {
+  int n = 0;
+  for (const MapFeature& f : slam.features()) n += f.feature->mspace_dim() > 0 ? 1 : 0;
+  return n;
+}
+
+// map.extend_when_unmapped: the map holds only the first 1000 steps' part of the
+// world (a third of the first lap); the whole route (two laps, noise seed 2)
+// is run in it. Plain localize goes on by odometry where the map ends; with
+// the switch the run maps on from where it left the map, and the map it
+// writes holds the whole world without duplicating the loaded part: no more
+// estimated features than a mapping run of the whole route, and an ATE no
+// worse than plain localize's.
+TEST(Localize, SwitchesToMappingWhereTheMapEnds) {
+  set_log_level(LogLevel::Warn);
+  const fs::path map_dir = scratch("part");
+  {
+    PluginRegistry registry;
+    Slam slam(load("sim_points.yaml", "ekf", registry, map_dir, 1000, sim_world(1, 1.0)), registry);
+    run_to_end(slam, quiet());
+  }
+  int mapping_features = 0;
+  double mapping_ate = 0.0;
+  {
+    PluginRegistry registry;
+    Slam slam(load("sim_points.yaml", "ekf", registry, scratch("whole"), 0, sim_world(2, 1.0)), registry);
+    const RunResult r = run_to_end(slam, quiet());
+    mapping_features = estimated_features(slam);
+    if (r.summary.errors) mapping_ate = r.summary.errors->ate_rmse;
+  }
+  const auto localize = [&](double extend_when_unmapped, const std::string& out) {
+    PluginRegistry registry;
+    RunConfig c = load("sim_points.yaml", "ekf", registry, scratch(out), 0, sim_world(2, 1.0));
+    c.map.load = map_dir.string();
+    c.map.mode = MapConfig::Mode::Localize;
+    c.map.extend_when_unmapped = extend_when_unmapped;
+    auto slam = std::make_unique<Slam>(c, registry);
+    const RunResult r = run_to_end(*slam, quiet());
+    return std::make_tuple(r.summary.errors ? r.summary.errors->ate_rmse : INFINITY, estimated_features(*slam),
+                           *slam->map_session_report(), fs::exists(fs::path(c.output.dir) / "map.bin"));
+  };
+  const auto [plain_ate, plain_features, plain_report, plain_wrote] = localize(0.0, "plain");
+  const auto [ate, features, report, wrote] = localize(2.0, "switching");
+  std::cout << "[ switch     ] map of the first 1000 steps (" << report.loaded << " features); plain localize ATE "
+            << plain_ate << " m; with extend_when_unmapped 2 m: switched at step " << report.switched_to_mapping_at_step
+            << " (" << report.switched_at_path << " m), ATE " << ate << " m, " << features
+            << " estimated features, " << report.added << " created; mapping run of the whole route: ATE "
+            << mapping_ate << " m, " << mapping_features << " estimated features\n";
+  EXPECT_EQ(plain_report.switched_to_mapping_at_step, 0);
+  EXPECT_FALSE(plain_wrote);
+  EXPECT_EQ(plain_features, report.loaded);
+  EXPECT_GT(report.switched_to_mapping_at_step, 900);
+  EXPECT_LT(report.switched_to_mapping_at_step, 2980);  // within the first lap
+  EXPECT_TRUE(wrote);
+  EXPECT_GT(features, report.loaded);
+  EXPECT_LE(features, mapping_features);
+  EXPECT_LE(ate, plain_ate);
+}
+
 /// The run of the data after its first `first` steps (of `steps`), in `mode`
 /// in the map of a run of those first steps, starting where that run ended.
 RunConfig second_session(const std::string& config, const std::string& estimator, PluginRegistry& registry,
@@ -438,9 +565,12 @@ TEST(Localize, IntelSecondHalfInTheMapOfTheFirst) {
   EXPECT_EQ(in_map.matched, in_full.matched);
   EXPECT_LE(in_map.rotation_deg.mean, in_full.rotation_deg.mean);
   // The target also asks for the translation error no worse than the
-  // full run's. It is not met: measured 0.01516 m localized against 0.01482 m
-  // in the full run (2 % worse; docs/maps.md §4 says why). It is reported, not
-  // asserted, until localize can map where the first half's map ends.
+  // full run's. It is not met: measured 0.0197 m localized (Schmidt update,
+  // joint map covariance) against 0.0148 m in the full run, with a spread of
+  // ±0.03 m over the 33 relations (docs/maps.md §4 says why: only 36 % of the
+  // second half's measurements match a feature of the first half's map, 83 %
+  // in the full run). It is reported, not asserted, until localize can map
+  // where the first half's map ends.
   RecordProperty("translation_localized_m", std::to_string(in_map.translation.mean));
   RecordProperty("translation_full_run_m", std::to_string(in_full.translation.mean));
   const auto report = slam.map_session_report();
