@@ -343,7 +343,7 @@ the others as the command line's options of the same names.)")
       .def("trajectory", [](const PyRun& r) { return pose_arrays(r.slam().trajectory()); },
            "(t, poses): time stamps (N,) and poses (N, 6) as estimated online")
       .def("evaluated_trajectory", [](const PyRun& r) { return pose_arrays(r.slam().evaluated_trajectory()); },
-           "(t, poses): the trajectory that is scored (a smoother's smoothed one, in the reference's frame)")
+           "(t, poses): the trajectory that is scored (a re-linearising estimator's final one, in the reference's frame)")
       .def("ground_truth", [](const PyRun& r) { return pose_arrays(r.slam().ground_truth()); },
            "(t, poses) of the source's ground truth (empty when it has none)")
       .def_property_readonly("steps_done", [](const PyRun& r) { return r.slam().steps_done(); })

@@ -1,7 +1,7 @@
 """mspace: feature-based SLAM on the M-space feature representation.
 
     import mspace
-    run = mspace.Run("config/sim_points.yaml", set={"run.seed": 2}, estimator="smoother")
+    run = mspace.Run("config/sim_points.yaml", set={"run.seed": 2})   # estimator="<plugin>" swaps it
     summary = run.run()                      # to the end, with the progress bar and outputs
     t, poses = run.evaluated_trajectory()    # NumPy arrays: (N,), (N, 6) x y z θ φ ψ
     for f in run.features(): print(f.type, f.mspace_dim, f.coords, f.covariance)
