@@ -21,6 +21,7 @@ PACKAGES=(
   libyaml-cpp-dev libspdlog-dev libcli11-dev libpng-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy
+  librosbag-storage-dev libsensor-msgs-dev libnav-msgs-dev libtf2-msgs-dev
 )
 
 missing=()
