@@ -109,10 +109,11 @@ struct Building {
   carmen_log::LogContents log;
 };
 
-Building building() {
+/// In a folder of its own per test (CTest runs the tests in parallel).
+Building building(const std::string& name) {
   sim_building::GeneratorSettings settings;
   settings.route.length_m = 40.0;
-  Building b{temp_dir("building"), {}};
+  Building b{temp_dir(name), {}};
   sim_building::write_data_set(sim_building::simulate(settings), b.dir);
   PluginArgs c = carmen_args(b.dir / "building.clf");
   c.params.set("ground_truth", (b.dir / "ground_truth.tum").string());
@@ -121,7 +122,7 @@ Building building() {
 }
 
 TEST(Rosbag, SimulatedBuildingOnTfReplaysAsTheClf) {
-  const Building b = building();
+  const Building b = building("building_tf");
   ASSERT_TRUE(b.log.laser.offset.has_value());
   const fs::path bag = b.dir / "building.bag";
   write_bag(b.log, bag, {.odometry_on_tf = true, .static_mount = b.log.laser.offset, .ground_truth = true});
@@ -141,7 +142,7 @@ TEST(Rosbag, SimulatedBuildingOnTfReplaysAsTheClf) {
 }
 
 TEST(Rosbag, LaserOdometryFromTheBagMatchesTheClfs) {
-  const Building b = building();
+  const Building b = building("building_scan_matched");
   const fs::path bag = b.dir / "building.bag";
   write_bag(b.log, bag, {.odometry_on_tf = false, .static_mount = b.log.laser.offset, .ground_truth = false});
   PluginArgs c = carmen_args(b.dir / "building.clf");
