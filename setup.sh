@@ -23,6 +23,7 @@ PACKAGES=(
   libyaml-cpp-dev libspdlog-dev libcli11-dev libpng-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-dev pybind11-dev python3-numpy
+  librosbag-storage-dev libsensor-msgs-dev libnav-msgs-dev libtf2-msgs-dev
 )
 # The fuzz harnesses: clang, and libFuzzer / ASan / UBSan (only recommended by clang-14).
 [[ "${MSPACE_FUZZ_TOOLS:-OFF}" == ON ]] && PACKAGES+=(clang libclang-rt-14-dev zlib1g-dev)

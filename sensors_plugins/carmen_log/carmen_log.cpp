@@ -326,13 +326,16 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
 }
 
 CarmenLogSource::CarmenLogSource(const PluginArgs& args)
+    : CarmenLogSource(args, read_log(args.params.get_string("file"), options_from(args.params))) {}
+
+CarmenLogSource::CarmenLogSource(const PluginArgs& args, LogContents contents)
     : file_(args.params.get_string("file")),
+      log_(std::move(contents)),
       channel_(args.params.get_string("channel")),
       log_out_(args.logger) {
   const std::string& ground_truth = args.params.get_string("ground_truth");
   use_ground_truth_ = ground_truth != "none" && ground_truth != "false";
   Logger& log = args.log();
-  log_ = read_log(args.params.get_string("file"), options_from(args.params));
   if (log_.scans.empty()) throw std::runtime_error(args.params.get_string("file") + ": no laser scans in the file");
   if (log_.skipped > 0)
     log.warn("skipped ", log_.skipped, " malformed line(s); the first: ", log_.first_problem);

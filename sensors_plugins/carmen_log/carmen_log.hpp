@@ -44,6 +44,9 @@ class CarmenLogSource final : public DataSource {
 
   /// Reads the whole file (throws std::runtime_error "file:line: problem").
   explicit CarmenLogSource(const PluginArgs& args);
+  /// Replays scans read elsewhere (e.g. from a ROS bag) with the same
+  /// odometry, laser odometry and ground-truth handling; `file` names them.
+  CarmenLogSource(const PluginArgs& args, LogContents contents);
 
   bool next(DataStep& step) override;
   std::size_t size_hint() const override { return log_.scans.size(); }

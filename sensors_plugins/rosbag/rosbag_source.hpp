@@ -1,0 +1,38 @@
+// rosbag_source.hpp — the `rosbag` data source: a ROS 1 bag's
+// sensor_msgs/LaserScan topic replayed one scan per step, with the odometry
+// (nav_msgs/Odometry, or the odom → base transforms of /tf) interpolated at
+// each scan's header stamp. The steps are made by the `carmen_log` source's
+// code (its sources are compiled into this plugin), so the readings' layout
+// ((range, bearing) per beam, 0 = no return), the odometry increments, laser
+// odometry (`odometry: scan_matched`), ground truth and initial pose are
+// exactly those of a CARMEN log holding the same scans.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "mspace/params.hpp"
+#include "mspace/source.hpp"
+
+namespace mspace::carmen_log {
+class CarmenLogSource;
+}
+
+namespace mspace::rosbag_source {
+
+class RosbagSource final : public DataSource {
+ public:
+  static std::vector<ParamSpec> param_specs();
+  explicit RosbagSource(const PluginArgs& args);
+  ~RosbagSource() override;
+
+  bool next(DataStep& step) override;
+  std::size_t size_hint() const override;
+  Pose6 initial_pose() const override;
+  std::vector<RecordedMount> recorded_mounts() const override;
+
+ private:
+  std::unique_ptr<carmen_log::CarmenLogSource> steps_;
+};
+
+}  // namespace mspace::rosbag_source
