@@ -210,8 +210,8 @@ class PyRun {
   }
 
   py::dict summary() const {
-    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
-    return summary_dict(summarize(*slam_, wall));
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
+    return summary_dict(summarize(*slam_, elapsed));
   }
 
   std::vector<PyFeature> features() const {
