@@ -87,4 +87,60 @@ WheelCheckResult check_against_wheels(const std::vector<Eigen::Vector3d>& wheel,
                                       const std::vector<Eigen::Vector3d>& matched,
                                       const std::vector<IncrementSource>& source, const WheelCheckOptions& options);
 
+/// What the laser odometry teaches about the wheels, for the increments that
+/// must fall back to them (failed matches, logging gaps, vetoed matches).
+///
+/// Systematic errors, fitted by least squares (weights 1/L, the random-walk
+/// variance model above) over the matched increments the check kept:
+///   m_xy ≈ (1 + k_s) w_xy                 translation scale (wheel radius)
+///   m_θ  ≈ (1 + k_t) w_θ + b · w_x        turn scale (wheel base) and a
+///                                         heading drift per metre driven
+///                                         (unequal wheels)
+/// — the three errors that dominate differential-drive odometry (Borenstein
+/// and Feng's UMBmark names the same ones). `correct` removes them.
+///
+/// Noise: the spreads s_xy, s_θ of what is left (the robust medians of the
+/// check, on the corrected differences), as a random walk over the path:
+/// variance s²·(L + L̄) for an increment over a path L, as the check measured
+/// it. A long increment is composed from sub-steps — the odometry messages
+/// logged between the two scans when there are any, else K equal steps of
+/// about L̄ — each with covariance diag(s_xy², s_xy², s_θ²)·L_j, plus s²·L̄
+/// once, propagated in the increment's own frame. So a logging gap gets the
+/// lateral uncertainty its heading uncertainty causes (σ_lateral ∝ L^{3/2}),
+/// not only σ ∝ √L; and the systematic correction is applied to each
+/// sub-step, where the drift and turn scale act (on a gap's net increment
+/// they would not: the robot may have turned round and come back).
+struct WheelModel {
+  double scale = 0.0;        ///< k_s
+  double turn_scale = 0.0;   ///< k_t
+  double bias_per_m = 0.0;   ///< b (rad per m driven forward)
+  double sigma_xy = 0.0;     ///< s_xy after the correction (m/√m)
+  double sigma_theta = 0.0;  ///< s_θ after the correction (rad/√m)
+  double median_path = 0.0;  ///< L̄ (m)
+  double turn_length = 1.0;  ///< m of path per radian of turn (the path proxy)
+  std::size_t used = 0;      ///< increments fitted (0: no model; covariance() is then zero)
+
+  /// The wheel increment with the systematic errors removed.
+  Eigen::Vector3d correct(const Eigen::Vector3d& wheel) const;
+  /// Path proxy |w_xy| + turn_length·|w_θ| of an increment (m).
+  double path_of(const Eigen::Vector3d& increment) const;
+  /// Covariance of a (corrected) wheel increment driven over a path of
+  /// `path` m (at least its own path proxy; more when the robot may have
+  /// wandered, e.g. across a logging gap whose odometry was not logged).
+  Eigen::Matrix3d covariance(const Eigen::Vector3d& increment, double path) const;
+  /// The corrected composition of wheel sub-steps (the odometry messages
+  /// between two scans, as increments), and its covariance.
+  Eigen::Vector3d correct_along(const std::vector<Eigen::Vector3d>& steps) const;
+  Eigen::Matrix3d covariance_along(const std::vector<Eigen::Vector3d>& steps) const;
+
+ private:
+  /// Σ for the composition of `steps`, step j with noise ∝ paths[j].
+  Eigen::Matrix3d propagate(const std::vector<Eigen::Vector3d>& steps, const std::vector<double>& paths) const;
+};
+
+/// Fits the wheel model on the increments `check` kept as matched (the
+/// others are left out); `used` = 0 when fewer than 20 are left.
+WheelModel fit_wheel_model(const std::vector<Eigen::Vector3d>& wheel, const std::vector<Eigen::Vector3d>& matched,
+                           const WheelCheckResult& check, const WheelCheckOptions& options);
+
 }  // namespace mspace::scan_matching
