@@ -252,7 +252,8 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
       } else if (model.used > 0) {
         const double path = std::max(model.path_of(increment), speed * (times[i] - times[i - 1]));
         covariances_[i] = model.covariance(increment, path);
-        covariances_[i](2, 2) += std::pow(model.bias_per_m * path, 2);
+        covariances_[i](2, 2) +=
+            std::pow((std::abs(model.bias_per_m) + std::sqrt(model.parameter_covariance(2, 2))) * path, 2);
       }
     }
     if (check.source[i - 1] == scan_matching::IncrementSource::inconsistent)

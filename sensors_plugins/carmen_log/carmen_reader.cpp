@@ -456,9 +456,11 @@ LogContents read_log(const std::filesystem::path& file, const ReaderOptions& opt
       // strictly between the two scans (others are late or early messages).
       if (out.variant == Variant::Clf && out.format == Format::Carmen) {
         Scan& scan = out.scans.back();
-        const double after = out.scans.size() >= 2 ? out.scans[out.scans.size() - 2].t : -1e300;
-        for (const auto& [t, pose] : state.odom_since_scan)
-          if (t > after && t < scan.t) scan.odometry_between.push_back(pose);
+        if (out.scans.size() >= 2) {
+          const double after = out.scans[out.scans.size() - 2].t;
+          for (const auto& [t, pose] : state.odom_since_scan)
+            if (t > after && t < scan.t) scan.odometry_between.push_back(pose);
+        }
         state.odom_since_scan.clear();
       }
       if (out.scans.size() >= 2) {

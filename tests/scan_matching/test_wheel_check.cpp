@@ -134,6 +134,13 @@ TEST(WheelModel, RecoversPlantedScaleTurnScaleAndDriftAndTheSpreadLeft) {
   EXPECT_NEAR(model.bias_per_m, b, 0.02 * std::numbers::pi / 180.0);
   EXPECT_NEAR(model.sigma_xy / s_xy, 1.0, 0.1);
   EXPECT_NEAR(model.sigma_theta / s_th, 1.0, 0.1);
+  // The variance rates: the planted noise has variance s²·(d + |θ| + L̄) per
+  // axis (d the true distance, close to the wheels' for 2 % scale).
+  EXPECT_NEAR(model.xy_rates.per_m / (s_xy * s_xy), 1.0, 0.15);
+  EXPECT_NEAR(model.xy_rates.per_rad / (s_xy * s_xy), 1.0, 0.25);
+  EXPECT_NEAR(model.xy_rates.floor / (s_xy * s_xy * median_path), 1.0, 0.3);
+  EXPECT_NEAR(model.theta_rates.per_m / (s_th * s_th), 1.0, 0.15);
+  EXPECT_NEAR(model.theta_rates.per_rad / (s_th * s_th), 1.0, 0.25);
   // The correction is the model: 1 m straight on gains the drift as heading.
   const Eigen::Vector3d straight(1.0, 0.0, 0.0);
   EXPECT_NEAR(model.correct(straight)[0], 1.0 + model.scale, 1e-15);
@@ -148,33 +155,35 @@ TEST(WheelModel, RecoversPlantedScaleTurnScaleAndDriftAndTheSpreadLeft) {
 }
 
 TEST(WheelModel, CovarianceOfALongIncrementIsTheComposedRandomWalk) {
-  // Monte Carlo: a 20 m drive with a slow turn, as 53 sub-steps each with
-  // the model's random walk, composed; the empirical covariance of the end
-  // pose in the start frame must match WheelModel::covariance. The lateral σ
-  // grows faster than √L (heading error times distance).
+  // Monte Carlo: a 20 m drive with a slow turn, as sub-steps each with the
+  // model's random walk (variance per metre driven and per radian turned),
+  // after the per-increment floor, composed; the empirical covariance of the
+  // end pose in the start frame must match WheelModel::covariance. The
+  // lateral σ grows faster than √L (heading error times distance).
   WheelModel model;
-  model.sigma_xy = 0.005;
-  model.sigma_theta = 0.5 * std::numbers::pi / 180.0;
+  model.xy_rates = {0.005 * 0.005, 0.002 * 0.002, 0.001 * 0.001};
+  const double deg = std::numbers::pi / 180.0;
+  model.theta_rates = {std::pow(0.5 * deg, 2), std::pow(0.8 * deg, 2), std::pow(0.1 * deg, 2)};
   model.median_path = 0.4;
   model.used = 100;
   const Eigen::Vector3d total(20.0, 3.0, 0.6);
   const double path = model.path_of(total);
   const int K = static_cast<int>(std::ceil(path / model.median_path));  // sub-steps of about L̄ (53)
-  const double l = path / K;  // each sub-step's path; the floor s²·L̄ enters once, at the start
   const Eigen::Vector3d u = total / K;
+  const double d = u.head<2>().norm(), turn = std::abs(u[2]);
+  const double q_xy = model.xy_rates.per_m * d + model.xy_rates.per_rad * turn;
+  const double q_th = model.theta_rates.per_m * d + model.theta_rates.per_rad * turn;
   std::mt19937_64 rng(3);
   std::normal_distribution<double> normal;
   const int trials = 20000;
   std::vector<Eigen::Vector3d> ends(trials);
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (int t = 0; t < trials; ++t) {
-    const double floor = std::sqrt(model.median_path);
-    Eigen::Vector3d p(model.sigma_xy * floor * normal(rng), model.sigma_xy * floor * normal(rng),
-                      model.sigma_theta * floor * normal(rng));
+    Eigen::Vector3d p(std::sqrt(model.xy_rates.floor) * normal(rng), std::sqrt(model.xy_rates.floor) * normal(rng),
+                      std::sqrt(model.theta_rates.floor) * normal(rng));
     for (int k = 0; k < K; ++k) {
-      const Eigen::Vector3d step = u + Eigen::Vector3d(model.sigma_xy * std::sqrt(l) * normal(rng),
-                                                       model.sigma_xy * std::sqrt(l) * normal(rng),
-                                                       model.sigma_theta * std::sqrt(l) * normal(rng));
+      const Eigen::Vector3d step =
+          u + Eigen::Vector3d(std::sqrt(q_xy) * normal(rng), std::sqrt(q_xy) * normal(rng), std::sqrt(q_th) * normal(rng));
       const double c = std::cos(p[2]), s = std::sin(p[2]);
       p += Eigen::Vector3d(c * step[0] - s * step[1], s * step[0] + c * step[1], step[2]);
     }
@@ -187,12 +196,18 @@ TEST(WheelModel, CovarianceOfALongIncrementIsTheComposedRandomWalk) {
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(C(i, i) / empirical(i, i), 1.0, 0.06) << i;
   EXPECT_NEAR(C(1, 2) / std::sqrt(C(1, 1) * C(2, 2)), empirical(1, 2) / std::sqrt(empirical(1, 1) * empirical(2, 2)),
               0.03);
-  // The same increment given as its sub-steps: the same covariance.
-  EXPECT_TRUE(model.covariance_along(std::vector<Eigen::Vector3d>(K, u)).isApprox(C, 1e-12));
-  // Lateral σ over 20 m far beyond the √L random walk of translation alone.
-  EXPECT_GT(std::sqrt(C(1, 1)), 5.0 * model.sigma_xy * std::sqrt(path + model.median_path));
+  // The same increment given as its sub-steps (no systematic uncertainty): the same covariance.
+  EXPECT_TRUE(model.covariance_along(std::vector<Eigen::Vector3d>(static_cast<std::size_t>(K), u)).isApprox(C, 1e-12));
+  // Lateral σ over 20 m far beyond the √d random walk of translation alone.
+  EXPECT_GT(std::sqrt(C(1, 1)), 5.0 * std::sqrt(model.xy_rates.per_m * 20.0));
   // A longer path over the same increment (a robot that wandered in a gap): more uncertainty.
   EXPECT_GT(model.covariance(total, 3.0 * path).trace(), 2.0 * C.trace());
+  // Uncertain parameters add a systematic part: a 1 % turn-scale uncertainty
+  // over 0.6 rad of turning is 0.006 rad more heading σ, at least.
+  WheelModel uncertain = model;
+  uncertain.parameter_covariance(1, 1) = 0.01 * 0.01;
+  const Eigen::Matrix3d Cu = uncertain.covariance_along(std::vector<Eigen::Vector3d>(static_cast<std::size_t>(K), u));
+  EXPECT_NEAR(Cu(2, 2) - C(2, 2), std::pow(0.01 * 0.6, 2), 1e-9);
 }
 
 }  // namespace
