@@ -98,6 +98,7 @@ enum class PoseFile {
   Robot,           ///< trajectory.tum: the robot's estimated poses
   EvaluatedSensor, ///< trajectory_<sensor>.tum: those of evaluation.ground_truth_sensor
   Reference,       ///< ground_truth.tum: the source's reference poses
+  DeadReckoning,   ///< dead_reckoning.tum: the odometry alone (the summary's baseline)
 };
 
 /// The header text of a pose file: which body frame its poses are of (the
@@ -106,7 +107,8 @@ enum class PoseFile {
 /// the reference's own frame), and how the summary compares them.
 std::string pose_file_frame(const Slam& slam, PoseFile which);
 
-/// trajectory.tum, ground_truth.tum (when the source gave one) and, when the
+/// trajectory.tum, dead_reckoning.tum (the baseline, when it was computed),
+/// ground_truth.tum (when the source gave one) and, when the
 /// evaluation compares a sensor's poses with it, trajectory_<sensor>.tum;
 /// each written atomically with its frame header. Returns the files written.
 std::vector<std::filesystem::path> write_pose_files(const std::filesystem::path& dir, const Slam& slam);

@@ -72,6 +72,12 @@ std::string pose_file_frame(const Slam& slam, PoseFile which) {
         << "in the " << map_frame_text(c) << "\n"
         << "the run's ATE is this file against ground_truth.tum: poses paired by time stamp, SE(2) alignment\n";
       break;
+    case PoseFile::DeadReckoning:
+      h << "dead reckoning: the source's odometry increments through the motion model '" << c.motion.plugin
+        << "' from the run's start, no update (summary.yaml's dead_reckoning figures; odometry: "
+        << slam.odometry_description() << ")\n"
+        << "poses of the " << robot << "\n" << "in the " << map_frame_text(c) << "\n";
+      break;
     case PoseFile::Reference: {
       h << "reference poses from source '" << c.source.instance << "' (plugin '" << c.source.plugin << "') of the "
         << (sensor != nullptr ? sensor_frame_text(*sensor) : robot) << "\n"
@@ -96,6 +102,7 @@ std::vector<std::filesystem::path> write_pose_files(const std::filesystem::path&
     written.push_back(file);
   };
   write(dir / "trajectory.tum", slam.trajectory(), PoseFile::Robot);
+  if (!slam.dead_reckoning().empty()) write(dir / "dead_reckoning.tum", slam.dead_reckoning(), PoseFile::DeadReckoning);
   if (slam.ground_truth().empty()) return written;
   write(dir / "ground_truth.tum", slam.ground_truth(), PoseFile::Reference);
   const std::string& sensor = slam.config().evaluation.ground_truth_sensor;

@@ -206,15 +206,71 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   source.erase(source.begin());
   wheel_check_ = scan_matching::check_against_wheels(wheel, laser, source, check_options);
   const scan_matching::WheelCheckResult& check = wheel_check_;
+  // The increments that fall back to the wheels are not laser odometry: the
+  // motion noise configured for it does not describe them. With
+  // scan_match_wheel_model they are corrected for the wheels' scale, turn
+  // scale and drift, and carry the wheels' own noise, both measured against
+  // the matched increments of this log (WheelModel), sub-step by sub-step
+  // along the odometry logged between the two scans. Across a logging gap
+  // with no odometry logged inside, the path is unknown: the net increment
+  // is kept as the wheels gave it, its path taken as at least the median
+  // speed times the gap's duration, and the drift that path may have caused
+  // added to the heading's variance.
+  const bool use_model = params.get_bool("scan_match_wheel_model");
+  std::vector<std::vector<Eigen::Vector3d>> wheel_steps(n);  // per increment to scan i: the wheels' sub-steps
+  for (std::size_t i = 1; i < n; ++i) {
+    Pose2 from = log_.scans[i - 1].odometry;
+    for (const Pose2& p : log_.scans[i].odometry_between) {
+      wheel_steps[i].push_back(odometry_increment(from, p));
+      from = p;
+    }
+    wheel_steps[i].push_back(odometry_increment(from, log_.scans[i].odometry));
+  }
+  if (use_model) wheel_model_ = scan_matching::fit_wheel_model(wheel, laser, check, check_options);
+  const scan_matching::WheelModel& model = wheel_model_;
+  double speed = 0.0;  // median path per second while moving (m/s)
+  {
+    std::vector<double> speeds;
+    for (std::size_t i = 1; i < n; ++i) {
+      const double dt = times[i] - times[i - 1], path = model.path_of(wheel[i - 1]);
+      if (!gaps[i] && dt > 0.0 && path > 0.01) speeds.push_back(path / dt);
+    }
+    if (!speeds.empty()) {
+      std::nth_element(speeds.begin(), speeds.begin() + static_cast<long>(speeds.size() / 2), speeds.end());
+      speed = speeds[speeds.size() / 2];
+    }
+  }
   for (std::size_t i = 1; i < n; ++i) {
     const bool kept = check.source[i - 1] == scan_matching::IncrementSource::matched;
-    if (!kept) covariances_[i].setZero();
+    Eigen::Vector3d increment = laser[i - 1];
+    if (!kept) {
+      covariances_[i].setZero();
+      increment = wheel[i - 1];
+      if (model.used > 0 && (!gaps[i] || wheel_steps[i].size() > 1)) {
+        increment = model.correct_along(wheel_steps[i]);
+        covariances_[i] = model.covariance_along(wheel_steps[i]);
+      } else if (model.used > 0) {
+        const double path = std::max(model.path_of(increment), speed * (times[i] - times[i - 1]));
+        covariances_[i] = model.covariance(increment, path);
+        covariances_[i](2, 2) +=
+            std::pow((std::abs(model.bias_per_m) + std::sqrt(model.parameter_covariance(2, 2))) * path, 2);
+      }
+    }
     if (check.source[i - 1] == scan_matching::IncrementSource::inconsistent)
       log.debug("scan ", i, " (", file_, ":", log_.scans[i].line, "): scan match ", laser[i - 1].transpose(),
                 " contradicts the wheel odometry ", wheel[i - 1].transpose(), " (chi2 ", check.chi2[i - 1],
                 "): wheel odometry kept");
-    log_.scans[i].odometry = apply_increment(log_.scans[i - 1].odometry, kept ? laser[i - 1] : wheel[i - 1]);
+    log_.scans[i].odometry = apply_increment(log_.scans[i - 1].odometry, increment);
   }
+  if (model.used > 0)
+    log.info("wheel odometry measured against ", model.used, " matched increments: scale ", 100.0 * model.scale,
+             " %, turn scale ", 100.0 * model.turn_scale, " %, drift ", model.bias_per_m * 180.0 / std::numbers::pi,
+             " deg/m, spread after correction ", model.sigma_xy * 1000.0, " mm and ",
+             model.sigma_theta * 180.0 / std::numbers::pi,
+             " deg per sqrt(m); the increments that fall back to the wheels are corrected and carry that noise");
+  else if (use_model)
+    log.warn("laser odometry: fewer than 20 matched increments to measure the wheel odometry against; the "
+             "increments that fall back to the wheels keep the motion model's noise");
   double median = 0.0;
   if (!residuals.empty()) {
     std::nth_element(residuals.begin(), residuals.begin() + static_cast<long>(residuals.size() / 2), residuals.end());
@@ -304,6 +360,12 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                    "of that difference measured on the whole log (robust, per sqrt(m) of path): a match beyond "
                    "it falls back to the wheels and is counted (25.90: 1e-5 for a Gaussian); 0: no check",
                    0.0),
+      param_bool("scan_match_wheel_model", true,
+                 "increments that fall back to the wheels (failed or vetoed matches, logging gaps) are corrected "
+                 "for the wheels' scale, turn scale and drift per metre and carry the wheels' own noise (a random "
+                 "walk over the path; across a gap the path is at least the median speed times its duration), all "
+                 "measured against this log's matched increments; false: the raw wheel increments with the motion "
+                 "model's noise"),
       param_double("scan_match_gap_factor", 10.0,
                    "an increment spanning more than this many times the log's median time between scans "
                    "crosses a logging gap: not matched, the wheel odometry kept and counted; 0: no gap check",
@@ -407,6 +469,11 @@ std::vector<std::pair<std::string, double>> CarmenLogSource::figures() const {
                      static_cast<double>(wheel_check_.count(s)));
   out.emplace_back("laser_odometry_wheel_spread_m_per_sqrt_m", wheel_check_.sigma_xy);
   out.emplace_back("laser_odometry_wheel_spread_deg_per_sqrt_m", wheel_check_.sigma_theta * 180.0 / std::numbers::pi);
+  if (wheel_model_.used > 0) {
+    out.emplace_back("wheel_scale_error", wheel_model_.scale);
+    out.emplace_back("wheel_turn_scale_error", wheel_model_.turn_scale);
+    out.emplace_back("wheel_drift_deg_per_m", wheel_model_.bias_per_m * 180.0 / std::numbers::pi);
+  }
   return out;
 }
 

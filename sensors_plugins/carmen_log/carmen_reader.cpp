@@ -113,6 +113,7 @@ Scan parse_table_line(const std::vector<std::string>& tokens, const ReaderOption
 
 struct CarmenState {
   std::optional<Pose2> last_odom;  ///< newest ODOM line (GMapping variant)
+  std::vector<std::pair<double, Pose2>> odom_since_scan;  ///< ODOM lines (t, pose) since the last scan (CLF)
 };
 
 /// FLASER n ranges x y θ odom_x odom_y odom_θ t host logger_t.
@@ -439,16 +440,29 @@ LogContents read_log(const std::filesystem::path& file, const ReaderOptions& opt
           out.params.emplace(tokens[1], LogParam{tokens[2], line_no});
           continue;
         } else if (tokens[0] == "ODOM") {
-          state.last_odom = f.pose("the odometry pose");
+          const Pose2 pose = f.pose("the odometry pose");
           f.skip(3, "the velocities");
-          f.number("the time stamp");
+          const double t = f.number("the time stamp") + options.time_offset;
           f.expect_host_and_logger_time();
+          state.last_odom = pose;
+          if (out.variant == Variant::Clf) state.odom_since_scan.emplace_back(t, pose);
           continue;
         } else {
           continue;  // a message type this reader does not use
         }
       }
       out.scans.back().line = line_no;
+      // The wheels' path since the previous scan: the ODOM poses stamped
+      // strictly between the two scans (others are late or early messages).
+      if (out.variant == Variant::Clf && out.format == Format::Carmen) {
+        Scan& scan = out.scans.back();
+        if (out.scans.size() >= 2) {
+          const double after = out.scans[out.scans.size() - 2].t;
+          for (const auto& [t, pose] : state.odom_since_scan)
+            if (t > after && t < scan.t) scan.odometry_between.push_back(pose);
+        }
+        state.odom_since_scan.clear();
+      }
       if (out.scans.size() >= 2) {
         const Scan& previous = out.scans[out.scans.size() - 2];
         if (out.scans.back().t <= previous.t) {

@@ -20,7 +20,8 @@
 //    log (`Variant::GMapping`, recognised by its NEFF lines) the FLASER pose is
 //    GMapping's corrected pose (the ground truth of the scan) and the odometry
 //    of a scan is the newest ODOM line before it; GMapping re-anchors those,
-//    so they are not raw odometry (the reader warns).
+//    so they are not raw odometry (the reader warns). In a CLF the ODOM poses
+//    between two scans are kept with the later scan (Scan::odometry_between).
 //
 //  * The merged table of the Intel data set (`intel_910_scans.txt`): `#`
 //    comments, then one scan per line,
@@ -85,6 +86,10 @@ struct Scan {
   std::vector<double> bearings;    ///< rad, in the laser frame
   double max_range = 0.0;          ///< ROBOTLASER1 maximum-range field (0: none)
   std::optional<Pose2> laser_offset;  ///< ROBOTLASER1: the laser pose in the robot pose's frame
+  /// CLF logs: the ODOM poses logged after the previous scan and before this
+  /// one (by time stamp), oldest first — the path the wheels measured between
+  /// two scans, which matters across a logging gap of the laser.
+  std::vector<Pose2> odometry_between;
 };
 
 /// A PARAM line's value and line number.

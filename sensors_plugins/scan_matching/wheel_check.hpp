@@ -87,4 +87,79 @@ WheelCheckResult check_against_wheels(const std::vector<Eigen::Vector3d>& wheel,
                                       const std::vector<Eigen::Vector3d>& matched,
                                       const std::vector<IncrementSource>& source, const WheelCheckOptions& options);
 
+/// What the laser odometry teaches about the wheels, for the increments that
+/// must fall back to them (failed matches, logging gaps, vetoed matches).
+///
+/// Systematic errors, fitted by least squares (weights 1/L, the random-walk
+/// variance model above) over the matched increments the check kept:
+///   m_xy ≈ (1 + k_s) w_xy                 translation scale (wheel radius)
+///   m_θ  ≈ (1 + k_t) w_θ + b · w_x        turn scale (wheel base) and a
+///                                         heading drift per metre driven
+///                                         (unequal wheels)
+/// — the three errors that dominate differential-drive odometry (Borenstein
+/// and Feng's UMBmark names the same ones). `correct` removes them.
+///
+/// Noise: what the correction leaves, e = m − correct(w), as a random walk
+/// in distance driven d and angle turned |θ| (wheels err differently on the
+/// two: a turn in place scrubs the tyres), with a floor for the matcher's
+/// own error:
+///   Var(e_x) = Var(e_y) = a_xy d + c_xy |θ| + f_xy,   Var(e_θ) = a_θ d + c_θ |θ| + f_θ,
+/// the rates fitted to the squared residuals by non-negative least squares
+/// (the method of moments: a variance is a mean of squares). A long
+/// increment is composed from sub-steps — the odometry messages logged
+/// between the two scans when there are any, else K equal steps of about
+/// L̄ — each with its own d_j, |θ_j|, plus the floor once, propagated in the
+/// increment's own frame. So a logging gap gets the
+/// lateral uncertainty its heading uncertainty causes (σ_lateral ∝ L^{3/2}),
+/// not only σ ∝ √L; and the systematic correction is applied to each
+/// sub-step, where the drift and turn scale act (on a gap's net increment
+/// they would not: the robot may have turned round and come back).
+struct WheelModel {
+  double scale = 0.0;        ///< k_s
+  double turn_scale = 0.0;   ///< k_t
+  double bias_per_m = 0.0;   ///< b (rad per m driven forward)
+  double sigma_xy = 0.0;     ///< s_xy after the correction (m/√m), robust, as the check measures it
+  double sigma_theta = 0.0;  ///< s_θ after the correction (rad/√m)
+  /// Variance rates of one error component: per m driven, per rad turned, and a floor per increment.
+  struct Rates {
+    double per_m = 0.0, per_rad = 0.0, floor = 0.0;
+  };
+  Rates xy_rates;     ///< of e_x and of e_y (m²/m, m²/rad, m²)
+  Rates theta_rates;  ///< of e_θ (rad²/m, rad²/rad, rad²)
+  double median_path = 0.0;  ///< L̄ (m)
+  double turn_length = 1.0;  ///< m of path per radian of turn (the path proxy)
+  std::size_t used = 0;      ///< increments fitted (0: no model; covariance() is then zero)
+  /// Uncertainty of (k_s, k_t, b) over a stretch of the log: the spread of
+  /// the fit on 8 consecutive stretches of the matched increments (fewer
+  /// than 160: the parameters' own squares). covariance_along carries it
+  /// through the sub-steps, where it acts on every one alike.
+  Eigen::Matrix3d parameter_covariance = Eigen::Matrix3d::Zero();
+
+  /// The wheel increment with the systematic errors removed.
+  Eigen::Vector3d correct(const Eigen::Vector3d& wheel) const;
+  /// Path proxy |w_xy| + turn_length·|w_θ| of an increment (m).
+  double path_of(const Eigen::Vector3d& increment) const;
+  /// Covariance of a (corrected) wheel increment driven over a path of
+  /// `path` m (at least its own path proxy; more when the robot may have
+  /// wandered, e.g. across a logging gap whose odometry was not logged).
+  Eigen::Matrix3d covariance(const Eigen::Vector3d& increment, double path) const;
+  /// The corrected composition of wheel sub-steps (the odometry messages
+  /// between two scans, as increments), and its covariance.
+  Eigen::Vector3d correct_along(const std::vector<Eigen::Vector3d>& steps) const;
+  Eigen::Matrix3d covariance_along(const std::vector<Eigen::Vector3d>& steps) const;
+
+ private:
+  /// Σ for the composition of `steps` (corrected), step j's noise from
+  /// `noise_of[j]` (the wheel sub-step its rates are taken at), the floor once.
+  Eigen::Matrix3d propagate(const std::vector<Eigen::Vector3d>& steps,
+                            const std::vector<Eigen::Vector3d>& noise_of) const;
+};
+
+/// Fits the wheel model on the increments `check` kept as matched (the
+/// others are left out); `used` = 0 when fewer than 20 are left.
+/// Systematic terms the data cannot separate (a log that only drove
+/// straight never shows a turn scale) stay at zero.
+WheelModel fit_wheel_model(const std::vector<Eigen::Vector3d>& wheel, const std::vector<Eigen::Vector3d>& matched,
+                           const WheelCheckResult& check, const WheelCheckOptions& options);
+
 }  // namespace mspace::scan_matching

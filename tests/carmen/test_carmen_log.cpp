@@ -86,6 +86,29 @@ TEST(CarmenLog, ClfFlaserAndRobotlaser) {
   EXPECT_FALSE(source.next(s));
 }
 
+TEST(CarmenReader, KeepsTheOdometryLoggedBetweenTwoScans) {
+  // ODOM lines between two scans are the wheels' path from one to the other
+  // (what a laser logging gap hides); one stamped before the first scan, and
+  // one stamped after the second although written before it, are not.
+  const std::string flaser = [](double x, double t) {
+    return "FLASER 4 1.0 1.0 1.0 1.0 9 9 9 " + std::to_string(x) + " 0.0 0.0 " + std::to_string(t) + " host " +
+           std::to_string(t) + "\n";
+  }(0.0, 100.0);
+  const std::string later = "FLASER 4 1.0 1.0 1.0 1.0 9 9 9 3.0 0.0 0.0 103.0 host 103.0\n";
+  const auto file = write_temp("mspace_test_odom_between.clf",
+                               "ODOM 0 0 0 0 0 0 99.9 host 99.9\n" + flaser +
+                                   "ODOM 1.0 0.5 0.1 0 0 0 101.0 host 101.0\n"
+                                   "ODOM 2.0 0.5 0.2 0 0 0 102.0 host 102.0\n"
+                                   "ODOM 9.0 9.0 0.0 0 0 0 103.5 host 103.5\n" +
+                                   later);
+  const LogContents log = read_log(file, ReaderOptions{});
+  ASSERT_EQ(log.scans.size(), 2u);
+  EXPECT_TRUE(log.scans[0].odometry_between.empty());
+  ASSERT_EQ(log.scans[1].odometry_between.size(), 2u);
+  EXPECT_EQ(log.scans[1].odometry_between[0], Pose2(1.0, 0.5, 0.1));
+  EXPECT_EQ(log.scans[1].odometry_between[1], Pose2(2.0, 0.5, 0.2));
+}
+
 TEST(CarmenLog, GMappingVariantUsesCorrectedPoseAsGroundTruth) {
   const auto file = write_temp(
       "mspace_test.gfs.log",

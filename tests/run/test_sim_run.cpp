@@ -152,6 +152,31 @@ TEST_F(SimRun, SummaryReportsTheDeadReckoningBaseline) {
   ASSERT_TRUE(result.summary.errors.has_value());
   EXPECT_GT(dr.errors->ate_rmse, 10.0 * result.summary.errors->ate_rmse);
 
+  // dead_reckoning.tum holds the same poses (TUM: t x y z qx qy qz qw, 1 nm
+  // resolution), after a header that says what they are.
+  {
+    std::ifstream file(out_ / "dead_reckoning.tum");
+    ASSERT_TRUE(file) << "no dead_reckoning.tum in " << out_;
+    std::string line, header;
+    std::size_t k = 0;
+    while (std::getline(file, line)) {
+      if (line.rfind('#', 0) == 0) {
+        header += line + "\n";
+        continue;
+      }
+      std::istringstream fields(line);
+      double t = 0.0, px = 0.0, py = 0.0;
+      fields >> t >> px >> py;
+      ASSERT_LT(k, integrated.size());
+      EXPECT_NEAR(t, integrated[k].t, 1e-6);
+      EXPECT_NEAR(px, integrated[k].pose[kX], 1e-8);
+      EXPECT_NEAR(py, integrated[k].pose[kY], 1e-8);
+      ++k;
+    }
+    EXPECT_EQ(k, integrated.size());
+    EXPECT_NE(header.find("dead reckoning"), std::string::npos) << header;
+  }
+
   // summary.yaml and the printed summary carry it.
   const YAML::Node yaml = YAML::LoadFile((out_ / "summary.yaml").string())["dead_reckoning"];
   ASSERT_TRUE(yaml) << "summary.yaml has no dead_reckoning";

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -91,6 +93,121 @@ TEST(WheelCheck, PerfectDataKeepsAFloorInsteadOfFlaggingEverything) {
   const WheelCheckResult r = check_against_wheels(wheel, laser, source, WheelCheckOptions{});
   EXPECT_EQ(r.count(IncrementSource::inconsistent), 1u);
   EXPECT_EQ(r.source[50], IncrementSource::inconsistent);
+}
+
+TEST(WheelModel, RecoversPlantedScaleTurnScaleAndDriftAndTheSpreadLeft) {
+  // The laser sees the true motion; the wheels read it with a 2 % scale
+  // error, a −3 % turn-scale error, a drift of 0.1°/m and a random walk of
+  // 4 mm/√m and 0.3°/√m. The fit must find the three systematic errors and
+  // the random walk that is left.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> length(-0.1, 0.7), turn(-0.4, 0.4);
+  std::normal_distribution<double> normal;
+  const double k_s = 0.02, k_t = -0.03, b = 0.1 * std::numbers::pi / 180.0;
+  const double s_xy = 0.004, s_th = 0.3 * std::numbers::pi / 180.0;
+  const std::size_t n = 5000;
+  std::vector<Eigen::Vector3d> truth(n), wheel(n);
+  std::vector<double> path(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    truth[i] = Eigen::Vector3d(length(rng), 0.02 * normal(rng), turn(rng));
+    path[i] = truth[i].head<2>().norm() + std::abs(truth[i][2]);
+  }
+  std::vector<double> sorted = path;
+  std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+  const double median_path = sorted[n / 2];
+  for (std::size_t i = 0; i < n; ++i) {
+    // wheel = (truth − drift − noise) / (1 + scale): the inverse of the model.
+    const double root = std::sqrt(path[i] + median_path);
+    Eigen::Vector3d w;
+    w[0] = (truth[i][0] - s_xy * root * normal(rng)) / (1.0 + k_s);
+    w[1] = (truth[i][1] - s_xy * root * normal(rng)) / (1.0 + k_s);
+    w[2] = (truth[i][2] - b * w[0] - s_th * root * normal(rng)) / (1.0 + k_t);
+    wheel[i] = w;
+  }
+  const std::vector<IncrementSource> source(n, IncrementSource::matched);
+  const WheelCheckOptions options;
+  const WheelCheckResult check = check_against_wheels(wheel, truth, source, options);
+  const WheelModel model = fit_wheel_model(wheel, truth, check, options);
+  ASSERT_GT(model.used, n * 99 / 100);
+  EXPECT_NEAR(model.scale, k_s, 0.002);
+  EXPECT_NEAR(model.turn_scale, k_t, 0.003);
+  EXPECT_NEAR(model.bias_per_m, b, 0.02 * std::numbers::pi / 180.0);
+  EXPECT_NEAR(model.sigma_xy / s_xy, 1.0, 0.1);
+  EXPECT_NEAR(model.sigma_theta / s_th, 1.0, 0.1);
+  // The variance rates: the planted noise has variance s²·(d + |θ| + L̄) per
+  // axis (d the true distance, close to the wheels' for 2 % scale).
+  EXPECT_NEAR(model.xy_rates.per_m / (s_xy * s_xy), 1.0, 0.15);
+  EXPECT_NEAR(model.xy_rates.per_rad / (s_xy * s_xy), 1.0, 0.25);
+  EXPECT_NEAR(model.xy_rates.floor / (s_xy * s_xy * median_path), 1.0, 0.3);
+  EXPECT_NEAR(model.theta_rates.per_m / (s_th * s_th), 1.0, 0.15);
+  EXPECT_NEAR(model.theta_rates.per_rad / (s_th * s_th), 1.0, 0.25);
+  // The correction is the model: 1 m straight on gains the drift as heading.
+  const Eigen::Vector3d straight(1.0, 0.0, 0.0);
+  EXPECT_NEAR(model.correct(straight)[0], 1.0 + model.scale, 1e-15);
+  EXPECT_NEAR(model.correct(straight)[2], model.bias_per_m, 1e-15);
+
+  // Too few matched increments: no model, no covariance.
+  std::vector<IncrementSource> few(n, IncrementSource::failed);
+  for (std::size_t i = 0; i < 10; ++i) few[i] = IncrementSource::matched;
+  const WheelModel none = fit_wheel_model(wheel, truth, check_against_wheels(wheel, truth, few, options), options);
+  EXPECT_EQ(none.used, 0u);
+  EXPECT_TRUE(none.covariance(straight, 1.0).isZero());
+}
+
+TEST(WheelModel, CovarianceOfALongIncrementIsTheComposedRandomWalk) {
+  // Monte Carlo: a 20 m drive with a slow turn, as sub-steps each with the
+  // model's random walk (variance per metre driven and per radian turned),
+  // after the per-increment floor, composed; the empirical covariance of the
+  // end pose in the start frame must match WheelModel::covariance. The
+  // lateral σ grows faster than √L (heading error times distance).
+  WheelModel model;
+  model.xy_rates = {0.005 * 0.005, 0.002 * 0.002, 0.001 * 0.001};
+  const double deg = std::numbers::pi / 180.0;
+  model.theta_rates = {std::pow(0.5 * deg, 2), std::pow(0.8 * deg, 2), std::pow(0.1 * deg, 2)};
+  model.median_path = 0.4;
+  model.used = 100;
+  const Eigen::Vector3d total(20.0, 3.0, 0.6);
+  const double path = model.path_of(total);
+  const int K = static_cast<int>(std::ceil(path / model.median_path));  // sub-steps of about L̄ (53)
+  const Eigen::Vector3d u = total / K;
+  const double d = u.head<2>().norm(), turn = std::abs(u[2]);
+  const double q_xy = model.xy_rates.per_m * d + model.xy_rates.per_rad * turn;
+  const double q_th = model.theta_rates.per_m * d + model.theta_rates.per_rad * turn;
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> normal;
+  const int trials = 20000;
+  std::vector<Eigen::Vector3d> ends(trials);
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (int t = 0; t < trials; ++t) {
+    Eigen::Vector3d p(std::sqrt(model.xy_rates.floor) * normal(rng), std::sqrt(model.xy_rates.floor) * normal(rng),
+                      std::sqrt(model.theta_rates.floor) * normal(rng));
+    for (int k = 0; k < K; ++k) {
+      const Eigen::Vector3d step =
+          u + Eigen::Vector3d(std::sqrt(q_xy) * normal(rng), std::sqrt(q_xy) * normal(rng), std::sqrt(q_th) * normal(rng));
+      const double c = std::cos(p[2]), s = std::sin(p[2]);
+      p += Eigen::Vector3d(c * step[0] - s * step[1], s * step[0] + c * step[1], step[2]);
+    }
+    ends[static_cast<std::size_t>(t)] = p;
+    mean += p / trials;
+  }
+  Eigen::Matrix3d empirical = Eigen::Matrix3d::Zero();
+  for (const Eigen::Vector3d& p : ends) empirical += (p - mean) * (p - mean).transpose() / (trials - 1);
+  const Eigen::Matrix3d C = model.covariance(total, path);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(C(i, i) / empirical(i, i), 1.0, 0.06) << i;
+  EXPECT_NEAR(C(1, 2) / std::sqrt(C(1, 1) * C(2, 2)), empirical(1, 2) / std::sqrt(empirical(1, 1) * empirical(2, 2)),
+              0.03);
+  // The same increment given as its sub-steps (no systematic uncertainty): the same covariance.
+  EXPECT_TRUE(model.covariance_along(std::vector<Eigen::Vector3d>(static_cast<std::size_t>(K), u)).isApprox(C, 1e-12));
+  // Lateral σ over 20 m far beyond the √d random walk of translation alone.
+  EXPECT_GT(std::sqrt(C(1, 1)), 5.0 * std::sqrt(model.xy_rates.per_m * 20.0));
+  // A longer path over the same increment (a robot that wandered in a gap): more uncertainty.
+  EXPECT_GT(model.covariance(total, 3.0 * path).trace(), 2.0 * C.trace());
+  // Uncertain parameters add a systematic part: a 1 % turn-scale uncertainty
+  // over 0.6 rad of turning is 0.006 rad more heading σ, at least.
+  WheelModel uncertain = model;
+  uncertain.parameter_covariance(1, 1) = 0.01 * 0.01;
+  const Eigen::Matrix3d Cu = uncertain.covariance_along(std::vector<Eigen::Vector3d>(static_cast<std::size_t>(K), u));
+  EXPECT_NEAR(Cu(2, 2) - C(2, 2), std::pow(0.01 * 0.6, 2), 1e-9);
 }
 
 }  // namespace

@@ -13,7 +13,7 @@ namespace mspace::test_logged {
 
 /// The source's arguments for DIR/building.clf with ground truth DIR/ground_truth.tum.
 inline PluginArgs source_args(const std::filesystem::path& dir, const std::string& odometry, double wheel_gate,
-                              double gap_factor) {
+                              double gap_factor, bool wheel_model = true) {
   PluginArgs a;
   a.instance_name = "source";
   a.params = Params::defaults(carmen_log::CarmenLogSource::param_specs());
@@ -23,6 +23,7 @@ inline PluginArgs source_args(const std::filesystem::path& dir, const std::strin
   a.params.set("scan_match_max_range", 30.0);  // as config/intel_walls.yaml
   a.params.set("scan_match_wheel_gate", wheel_gate);
   a.params.set("scan_match_gap_factor", gap_factor);
+  a.params.set("scan_match_wheel_model", wheel_model);
   return a;
 }
 
