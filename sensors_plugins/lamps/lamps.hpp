@@ -20,8 +20,9 @@
 //    the top down — no single level relative to the frame finds every lamp
 //    when the brightest thing in view is not a lamp, lamps differ in
 //    brightness or vignetting darkens some below the middle of the ceiling.
-//    Each candidate is re-thresholded locally at half its own peak over its
-//    own surroundings (the median of a window around it): the half-maximum
+//    Each candidate is re-thresholded locally at half its own peak (the 90th
+//    percentile of its pixels, not the noise's maximum) over its own
+//    surroundings (the median of a window around it): the half-maximum
 //    contour of a blurred lamp is its true edge, so the centroid depends
 //    neither on exposure nor on a halo, a fixture ring or a neighbour; a
 //    blob without contrast C over its surroundings is dropped. A candidate
@@ -47,7 +48,8 @@
 //   - isolated: little else in its window above its half maximum (a patch
 //     of plain ceiling framed by tile lines has more ceiling beside it),
 //   - an edge all round: the gradient along its contour, in its lowest
-//     tenth, at least 0.35 of its median (the part of a panel that
+//     tenth, at least 0.35 of its median, and its mean in each eighth of the
+//     contour at least 0.35 of the median eighth's (the part of a panel that
 //     vignetting lifts above a level is bounded on one side by a shallow
 //     fall-off).
 // The blob's centroid (distorted pixel) is undistorted with the camera model.
