@@ -242,7 +242,7 @@ struct FoundLamp {
 };
 
 /// Relative mode, second pass: the lamp around the candidate pixel `seed` at
-/// the half maximum of its own peak over its surroundings — the median of
+/// the half maximum of its own `peak` (robust_peak) over its surroundings — the median of
 /// the smoothed image in a window around the candidate blob `box` (the box's
 /// size again on every side), outside the box. The window grows until the
 /// lamp's contour lies inside it. False when the blob does not stand out of
