@@ -287,6 +287,22 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   if (!slam.ground_truth().empty()) legend(positions_only ? "reference positions (dots)" : "true trajectory", {60, 170, 60});
   if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
   legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
+  // One line per feature type: how many, and at which M-space dimensions.
+  for (std::size_t t = 0; t < slam.feature_types().size(); ++t) {
+    int count = 0, lowest = 1 << 30, highest = -1;
+    for (const MapFeature& f : slam.features()) {
+      if (f.type != static_cast<int>(t) || f.feature->mspace_dim() == 0) continue;
+      ++count;
+      lowest = std::min(lowest, f.feature->mspace_dim());
+      highest = std::max(highest, f.feature->mspace_dim());
+    }
+    if (count == 0) continue;
+    const FeatureTypeSlot& slot = slam.feature_types()[t];
+    std::ostringstream text;  // (not string + string: GCC 12 warns falsely on that here)
+    text << "  " << slot.instance << " (" << slot.plugin << "): " << count << ", M-space dim " << lowest;
+    if (highest > lowest) text << "-" << highest;
+    legend(text.str(), dim_colour(highest, highest));
+  }
   if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
   cv::putText(img, slam.config().name, {size_px - 220, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
 

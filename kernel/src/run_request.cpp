@@ -27,6 +27,20 @@ void apply_map_request(RunConfig& config, const RunRequest& r) {
   if (!problem.empty()) throw ConfigError("--map / --mode: " + problem);
 }
 
+/// --seed on a run none of whose plugins draws random numbers changes
+/// nothing: say so rather than let the user believe the runs differ.
+void warn_if_nothing_seeded(const RunConfig& config) {
+  std::vector<const InstanceConfig*> all = {&config.source, &config.motion, &config.estimator};
+  for (const InstanceConfig& f : config.features) all.push_back(&f);
+  for (const SensorConfig& s : config.sensors) all.push_back(&s.extractor);
+  for (const InstanceConfig* instance : all)
+    if (instance->params.has("seed")) return;
+  std::string plugins;
+  for (const InstanceConfig* instance : all) plugins += (plugins.empty() ? "" : ", ") + instance->plugin;
+  kernel_log().warn("--seed ", *config.seed, ": no plugin of this run has a seed parameter (", plugins,
+                    "); it changes nothing, the run is deterministic as it is");
+}
+
 }  // namespace
 
 RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
@@ -41,6 +55,7 @@ RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
   if (r.seed) config.seed = *r.seed;
   if (!r.estimator.empty()) override_estimator(config, r.estimator, registry);
   apply_run_seed(config);
+  if (r.seed) warn_if_nothing_seeded(config);
   apply_map_request(config, r);
   return config;
 }

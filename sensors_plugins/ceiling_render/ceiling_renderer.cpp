@@ -143,10 +143,25 @@ std::string frame_name(std::size_t k) {
   return buf;
 }
 
-void write_png(const GreyImage& image, const fs::path& path) {
-  const cv::Mat mat(image.height, image.width, CV_8UC1,
-                    const_cast<std::uint8_t*>(image.pixels.data()));
-  if (!cv::imwrite(path.string(), mat)) throw std::runtime_error(path.string() + ": cannot write");
+void write_png(const cv::Mat& image, const fs::path& path) {
+  if (!cv::imwrite(path.string(), image)) throw std::runtime_error(path.string() + ": cannot write");
+}
+
+/// Frame k as the settings' PNG: 8-bit grey, or 16-bit with `bit_depth` bits used.
+void write_frame(const CeilingRenderer& renderer, const Pose6& pose, std::size_t k, const fs::path& path) {
+  const RenderSettings& s = renderer.settings();
+  if (s.bit_depth == 8) {
+    GreyImage image = renderer.render(pose, k);
+    write_png(cv::Mat(image.height, image.width, CV_8UC1, image.pixels.data()), path);
+    return;
+  }
+  std::vector<float> levels = renderer.render_levels(pose, k);
+  cv::Mat deep;
+  const double full_scale = std::ldexp(1.0, s.bit_depth) - 1.0;
+  // convertTo rounds and saturates to 0–65535; values above full scale are clipped to it below.
+  cv::Mat1f(s.camera.height, s.camera.width, levels.data()).convertTo(deep, CV_16U, full_scale / 255.0);
+  cv::min(deep, full_scale, deep);
+  write_png(deep, path);
 }
 
 }  // namespace
@@ -163,9 +178,24 @@ camera::CameraModel default_camera() {
   return c;
 }
 
+camera::CameraModel scaled_camera(const camera::CameraModel& c, double scale) {
+  camera::CameraModel s = c;
+  s.width = static_cast<int>(std::lround(c.width * scale));
+  s.height = static_cast<int>(std::lround(c.height * scale));
+  s.fx *= scale;
+  s.fy *= scale;
+  s.cx = (c.cx + 0.5) * scale - 0.5;
+  s.cy = (c.cy + 0.5) * scale - 0.5;
+  return s;
+}
+
 CeilingRenderer::CeilingRenderer(const CeilingWorld& world, const RenderSettings& settings,
                                  std::uint64_t seed)
     : world_(world), settings_(settings), seed_(seed) {
+  if (settings_.bit_depth != 8 && (settings_.bit_depth < 10 || settings_.bit_depth > 16))
+    throw std::invalid_argument("ceiling renderer: bit_depth must be 8 or 10-16");
+  if (settings_.jpeg_quality < 0 || settings_.jpeg_quality > 100)
+    throw std::invalid_argument("ceiling renderer: jpeg_quality must be 0-100");
   const camera::CameraModel& c = settings_.camera;
   const int n = settings_.supersampling;
   rays_.reserve(static_cast<std::size_t>(c.width * c.height * n * n));
@@ -188,14 +218,15 @@ CeilingRenderer::CeilingRenderer(const CeilingWorld& world, const RenderSettings
   }
 }
 
-GreyImage CeilingRenderer::render(const Pose6& robot_pose, std::uint64_t frame) const {
+std::vector<float> CeilingRenderer::render_levels(const Pose6& robot_pose, std::uint64_t frame) const {
   const camera::CameraModel& c = settings_.camera;
   const Pose6 x_mc = compound(robot_pose, c.mount);  // eq. 17
   const Eigen::Matrix3d R = rotation(x_mc);
   const Eigen::Vector3d origin = x_mc.head<3>();
   const int n2 = settings_.supersampling * settings_.supersampling;
 
-  cv::Mat1f image(c.height, c.width);
+  std::vector<float> levels(static_cast<std::size_t>(c.width) * static_cast<std::size_t>(c.height));
+  cv::Mat1f image(c.height, c.width, levels.data());
   auto ray = rays_.begin();
   for (int v = 0; v < c.height; ++v) {
     for (int u = 0; u < c.width; ++u) {
@@ -213,12 +244,23 @@ GreyImage CeilingRenderer::render(const Pose6& robot_pose, std::uint64_t frame) 
     SimRandom rng(seed_, kFirstNoiseStream + frame);
     for (float& p : image) p += static_cast<float>(settings_.noise_sigma * rng.normal());
   }
+  return levels;
+}
+
+GreyImage CeilingRenderer::render(const Pose6& robot_pose, std::uint64_t frame) const {
+  const camera::CameraModel& c = settings_.camera;
+  std::vector<float> levels = render_levels(robot_pose, frame);
   GreyImage out;
   out.width = c.width;
   out.height = c.height;
   out.pixels.resize(static_cast<std::size_t>(c.width * c.height));
   cv::Mat1b wrapped(c.height, c.width, out.pixels.data());
-  image.convertTo(wrapped, CV_8U);  // rounds and saturates to 0–255
+  cv::Mat1f(c.height, c.width, levels.data()).convertTo(wrapped, CV_8U);  // rounds and saturates to 0–255
+  if (settings_.jpeg_quality > 0) {
+    std::vector<std::uint8_t> jpeg;
+    cv::imencode(".jpg", wrapped, jpeg, {cv::IMWRITE_JPEG_QUALITY, settings_.jpeg_quality});
+    cv::imdecode(jpeg, cv::IMREAD_GRAYSCALE).copyTo(wrapped);
+  }
   return out;
 }
 
@@ -260,7 +302,7 @@ SequenceSummary write_sequence(const SequenceSettings& s, const std::string& fol
       summary.path_length += trajectory.increments[k - 1].head<2>().norm();
     }
     const std::string t = num(static_cast<double>(k) * s.dt);
-    write_png(renderer.render(truth, k), dir / frame_name(k));
+    write_frame(renderer, truth, k, dir / frame_name(k));
     frames_csv << t << "," << frame_name(k) << "\n";
     odometry_csv << t << "," << num(odometry[kX]) << "," << num(odometry[kY]) << ","
                  << num(odometry[kTheta]) << "\n";

@@ -7,7 +7,8 @@
 // of the *distorted* image (each undistorted with the camera model, so the
 // lens distortion is exact), averaged; times the vignetting falloff and the
 // exposure gain, plus the offset; then a Gaussian blur (the lens) and Gaussian
-// noise (the sensor), rounded and saturated to 8-bit grey. The defaults
+// noise (the sensor), rounded and saturated to 8-bit grey (or written with
+// more bits, optionally through JPEG compression). The defaults
 // (gain 1, offset 0, no vignetting) give the images of the first renderer
 // bit for bit; the other settings give the variety other cameras show
 // (auto exposure, dark corners, noisier sensors) for the extractors' tests. The noise of frame k
@@ -58,12 +59,26 @@ struct RenderSettings {
   /// Vignetting: radiance × (1 − vignetting · (r / r_corner)²), r the pixel's
   /// distance from the principal point (0: none; 0.4: corners 40 % darker).
   double vignetting = 0.0;
+  /// 1–100: every image goes through JPEG compression at this quality (its
+  /// block artefacts and ringing), in render() and so in written sequences
+  /// (0: none).
+  int jpeg_quality = 0;
+  /// Bits per pixel of the written PNGs: 8, or 10–16 for 16-bit PNGs whose
+  /// values use the low `bit_depth` bits (a 12-bit sensor stores 0–4095):
+  /// grey g (0–255) is written as g · (2^bit_depth − 1) / 255, from the
+  /// unquantised image.
+  int bit_depth = 8;
 };
 
 /// The default camera: 320×240, f = 260 px, mild barrel distortion, mounted
 /// 0.1 m ahead of the robot centre and 0.4 m above the floor looking straight
 /// up (camera x = robot x, camera y = robot y, optical axis = robot z).
 camera::CameraModel default_camera();
+
+/// The camera `c` with `scale` times as many pixels along each axis (same
+/// field of view and distortion): focal lengths and principal point scaled
+/// (pixel centres are integers, so c' = (c + ½)·scale − ½).
+camera::CameraModel scaled_camera(const camera::CameraModel& c, double scale);
 
 class CeilingRenderer {
  public:
@@ -72,6 +87,10 @@ class CeilingRenderer {
   /// The image seen from the robot pose x_mr (camera at x_mr ⊕ mount, T-RO eq. 17);
   /// `frame` selects the noise stream.
   GreyImage render(const Pose6& robot_pose, std::uint64_t frame) const;
+
+  /// The same image before rounding, saturation and JPEG: grey levels as
+  /// floats (row-major), for deeper bit depths.
+  std::vector<float> render_levels(const Pose6& robot_pose, std::uint64_t frame) const;
 
   const RenderSettings& settings() const { return settings_; }
 

@@ -18,6 +18,7 @@ constexpr double kDoorHeader = 2.05;  ///< m
 constexpr std::uint64_t kGreyStream = 11;
 constexpr std::uint64_t kLampStream = 12;
 constexpr std::uint64_t kFixtureStream = 13;
+constexpr std::uint64_t kLampGreyStream = 14;
 
 /// Plain ceiling greys before the seed's jitter.
 constexpr double kCorridorGrey = 192.0;
@@ -89,13 +90,18 @@ CeilingWorld::CeilingWorld(std::uint64_t seed, const Appearance& appearance)
   auto add_lamp = [&](double x, double y, int region) {
     const Eigen::Vector3d c(x + lamp_rng.uniform(-0.2, 0.2), y + lamp_rng.uniform(-0.2, 0.2),
                             regions_[static_cast<std::size_t>(region)].ceiling_z);
-    lamps_.push_back({c, appearance_.lamp_radius});
+    lamps_.push_back({c, appearance_.lamp_radius, appearance_.lamp_grey});
   };
   for (double x : {-4.0, 0.0, 4.0, 8.0}) add_lamp(x, 0.45, 0);
   for (double x : {-6.5, -3.5})
     for (double y : {3.0, 5.0}) add_lamp(x, y, 1);
   for (double x : {3.5, 6.0, 8.5})
     for (double y : {3.0, 5.8}) add_lamp(x, y, 2);
+  if (appearance_.lamp_grey_spread > 0.0) {
+    SimRandom lamp_grey_rng(seed, kLampGreyStream);
+    for (Lamp& lamp : lamps_) lamp.grey *= 1.0 - appearance_.lamp_grey_spread * lamp_grey_rng.uniform(0.0, 1.0);
+  }
+  if (!appearance_.lamps) lamps_.clear();
 
   // Light panels 1.2 m × 0.3 m, jittered by up to 0.05 m.
   SimRandom fixture_rng(seed, kFixtureStream);
@@ -165,20 +171,55 @@ double CeilingWorld::range(const Eigen::Vector2d& origin, const Eigen::Vector2d&
   return travelled;
 }
 
+double CeilingWorld::lamp_distance(const Eigen::Vector2d& p, const Lamp& lamp) const {
+  const Eigen::Vector2d d = p - lamp.centre.head<2>();
+  if (appearance_.lamp_shape == LampShape::Disc) return d.norm() - lamp.radius;
+  // A rectangle of half sizes h, its corners rounded with radius rc: the
+  // distance from the rectangle of half sizes h − rc, minus rc (the standard
+  // signed distance of a box: outside, the distance to its nearest point;
+  // inside, minus the distance to its nearest side).
+  const double rc = appearance_.lamp_shape == LampShape::RoundedSquare ? 0.5 * lamp.radius : 0.0;
+  const Eigen::Vector2d h(lamp.radius * appearance_.lamp_aspect - rc, lamp.radius - rc);
+  const Eigen::Vector2d q = d.cwiseAbs() - h;
+  return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0) - rc;
+}
+
+double CeilingWorld::lamp_extent(const Lamp& lamp) const {
+  const double half_length = lamp.radius * std::max(appearance_.lamp_aspect, 1.0);
+  const double corner = appearance_.lamp_shape == LampShape::Disc
+                            ? half_length
+                            : std::hypot(lamp.radius * appearance_.lamp_aspect, lamp.radius);
+  return corner + appearance_.ring_width;
+}
+
 double CeilingWorld::ceiling_shade(const Region& region, const Eigen::Vector3d& p) const {
   const Appearance& a = appearance_;
+  const bool plain_discs = a.lamp_shape == LampShape::Disc && a.lamp_falloff == 0.0 && a.ring_width == 0.0 &&
+                           a.halo_grey == 0.0;
+  double glow = 0.0;  // the lamps' halos on the ceiling (grey levels)
   for (const Lamp& lamp : lamps_) {
-    if (lamp.centre.z() == region.ceiling_z && disc_distance2(p, lamp) <= lamp.radius * lamp.radius)
-      return a.lamp_grey;
+    if (lamp.centre.z() != region.ceiling_z) continue;
+    if (plain_discs) {  // the first renderer's test, bit for bit
+      if (disc_distance2(p, lamp) <= lamp.radius * lamp.radius) return lamp.grey;
+      continue;
+    }
+    const double d = lamp_distance(p.head<2>(), lamp);
+    if (d <= 0.0) {
+      // s: 0 at the centre, 1 on the rim (d = −radius at the centre of a disc or square).
+      const double s = std::clamp(1.0 + d / lamp.radius, 0.0, 1.0);
+      return lamp.grey * (1.0 - a.lamp_falloff * s * s);
+    }
+    if (d <= a.ring_width) return a.ring_grey;
+    if (a.halo_grey > 0.0) glow += a.halo_grey * std::exp(-(d - a.ring_width) / a.halo_width);
   }
   for (const Fixture& f : fixtures_) {
     if (f.z == region.ceiling_z && f.box.contains(p.head<2>())) return a.fixture_grey;
   }
   if (region.tile_grid && (on_grid_line(p.x(), a.tile_spacing, a.tile_line_width) ||
                            on_grid_line(p.y(), a.tile_spacing, a.tile_line_width))) {
-    return region.ceiling_grey - a.tile_line_darkening;
+    return region.ceiling_grey - a.tile_line_darkening + glow;
   }
-  return region.ceiling_grey;
+  return region.ceiling_grey + glow;
 }
 
 double CeilingWorld::wall_shade(double z, double ceiling_z) const {

@@ -17,7 +17,8 @@
 // the floor to the ceiling, so every room's ceiling meets its four walls in
 // four horizontal lines at ceiling height (the "wall/ceiling joints"); the
 // wall above a door continues up to the ceiling, so the joint runs on above it.
-// Light fixtures are bright rectangular panels, lamps bright discs, both flat
+// Light fixtures are bright rectangular panels, lamps bright discs (or, with
+// Appearance, squares and rectangles with halos, rings, other greys), both flat
 // on the ceiling. The corridor ceiling has a fine tile grid (thin dark lines
 // every 0.6 m) that gives the extractor false, repetitive line readings.
 //
@@ -55,11 +56,17 @@ struct Fixture {
   double z = 0.0;
 };
 
-/// A round lamp: a bright disc flat on a ceiling.
+/// A lamp flat on a ceiling: a bright disc, or a square / rectangle (with
+/// sharp or rounded corners, sides along the world axes) of half width
+/// `radius` across y (and radius × Appearance::lamp_aspect along x).
 struct Lamp {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
   double radius = 0.0;
+  double grey = 255.0;  ///< radiance at the lamp's centre
 };
+
+/// The outline of the lamps.
+enum class LampShape { Disc, Square, RoundedSquare };
 
 /// A horizontal line segment in the world (wall/ceiling joint or panel edge).
 struct Segment3 {
@@ -77,6 +84,17 @@ struct Appearance {
   double tile_line_width = 0.012; ///< m
   double tile_line_darkening = 30.0;
   double lamp_radius = 0.10;      ///< m
+  // The lamps of other buildings and renderers (defaults: the first renderer's
+  // flat white discs; none of these settings changes its images).
+  bool lamps = true;                       ///< false: a ceiling without lamps
+  LampShape lamp_shape = LampShape::Disc;  ///< square/rounded: half width lamp_radius
+  double lamp_aspect = 1.0;       ///< square/rounded: length along x / width along y
+  double lamp_grey_spread = 0.0;  ///< each lamp's grey is lamp_grey × (1 − spread · U(0, 1))
+  double lamp_falloff = 0.0;      ///< not uniformly bright: × (1 − falloff · s²), s = 0 centre, 1 rim
+  double ring_width = 0.0;        ///< m: a fixture ring of grey ring_grey around each lamp (0: none)
+  double ring_grey = 70.0;
+  double halo_grey = 0.0;         ///< glow on the ceiling around a lamp: grey levels added at its rim …
+  double halo_width = 0.1;        ///< … falling off as exp(−distance / halo_width) (m)
 };
 
 class CeilingWorld {
@@ -101,6 +119,9 @@ class CeilingWorld {
   const std::vector<Fixture>& fixtures() const { return fixtures_; }
   const std::vector<Lamp>& lamps() const { return lamps_; }
   const Appearance& appearance() const { return appearance_; }
+  /// The radius of the circle around a lamp's centre that holds all of it
+  /// (corners and fixture ring included).
+  double lamp_extent(const Lamp& lamp) const;
 
   /// The wall/ceiling joints (four per room and corridor) — the true ceiling lines.
   std::vector<Segment3> joints() const;
@@ -113,6 +134,8 @@ class CeilingWorld {
 
  private:
   double ceiling_shade(const Region& region, const Eigen::Vector3d& p) const;
+  /// Signed distance (m) of the ceiling point p from the lamp's outline, < 0 inside.
+  double lamp_distance(const Eigen::Vector2d& p, const Lamp& lamp) const;
   double wall_shade(double z, double ceiling_z) const;
 
   Appearance appearance_;

@@ -39,12 +39,49 @@ int main(int argc, char** argv) {
   app.add_option("--tile-darkening", settings.appearance.tile_line_darkening,
                  "ceiling texture: grey-level drop of the tile grid lines")
       ->check(CLI::NonNegativeNumber);
+  auto& a = settings.appearance;
+  std::string shape = "disc";
+  app.add_option("--lamp-shape", shape, "lamp outline: disc, square or rounded (a square with rounded corners)")
+      ->check(CLI::IsMember({"disc", "square", "rounded"}));
+  app.add_option("--lamp-aspect", a.lamp_aspect, "square/rounded lamps: length / width (1: square)")
+      ->check(CLI::Range(1.0, 10.0));
+  app.add_option("--lamp-grey-spread", a.lamp_grey_spread,
+                 "each lamp's grey is lamp-grey * (1 - spread * U(0,1)) (lamps of different brightness)")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--lamp-falloff", a.lamp_falloff, "lamps dimmer towards the rim: * (1 - falloff * s^2)")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--ring-width", a.ring_width, "fixture ring around each lamp (m, 0: none)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--ring-grey", a.ring_grey, "fixture ring grey level")->check(CLI::NonNegativeNumber);
+  app.add_option("--halo-grey", a.halo_grey, "glow around each lamp: grey levels added at its rim (0: none)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--halo-width", a.halo_width, "glow fall-off distance (m)")->check(CLI::PositiveNumber);
+  app.add_option("--panel-grey", a.fixture_grey, "light panel grey level (brighter than lamps: a bright non-lamp)")
+      ->check(CLI::NonNegativeNumber);
+  bool no_lamps = false;
+  app.add_flag("--no-lamps", no_lamps, "a ceiling without lamps (panels and lines only)");
+  double scale = 1.0;
+  app.add_option("--scale", scale, "image resolution: times the default 320x240 (same field of view)")
+      ->check(CLI::Range(0.25, 8.0));
+  app.add_option("--supersampling", settings.render.supersampling, "rays per pixel along each axis")
+      ->check(CLI::Range(1, 8));
+  app.add_option("--jpeg-quality", settings.render.jpeg_quality,
+                 "pass every image through JPEG compression at this quality (1-100, 0: none)")
+      ->check(CLI::Range(0, 100));
+  app.add_option("--bit-depth", settings.render.bit_depth,
+                 "8, or 10-16: 16-bit PNGs whose values use that many bits (12: 0-4095)")
+      ->check(CLI::Range(8, 16));
   double distortion_scale = 1.0;
   app.add_option("--distortion-scale", distortion_scale,
                  "multiplies the default lens distortion coefficients (0: a pinhole camera)")
       ->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
   settings.laser.enabled = !no_laser;
+  a.lamps = !no_lamps;
+  a.lamp_shape = shape == "square"    ? mspace::ceiling_render::LampShape::Square
+                 : shape == "rounded" ? mspace::ceiling_render::LampShape::RoundedSquare
+                                      : mspace::ceiling_render::LampShape::Disc;
+  settings.render.camera = mspace::ceiling_render::scaled_camera(settings.render.camera, scale);
   for (double& k : settings.render.camera.distortion) k *= distortion_scale;
   try {
     const auto summary = mspace::ceiling_render::write_sequence(settings, out);

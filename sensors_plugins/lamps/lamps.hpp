@@ -1,5 +1,6 @@
-// lamps.hpp — the `lamps` extractor: bright, roughly circular blobs in an
-// upward-looking camera's image (round ceiling lamps) become bearing vectors.
+// lamps.hpp — the `lamps` extractor: bright, compact blobs in an
+// upward-looking camera's image (ceiling lamps: round, square or a little
+// oblong) become bearing vectors.
 //
 // Input: a camera SensorReading of the `image_sequence` source (`file` = the
 // image, `values` = the intrinsics row of camera_model.hpp).
@@ -7,28 +8,50 @@
 // Pipeline (OpenCV, in the .cpp). The lamp mask comes from one of two modes:
 //
 //  * `threshold_mode: relative` (the default) — thresholds relative to the
-//    image, so that auto exposure, a dimmer lamp or a noisier sensor do not
-//    lose the lamps. The image is smoothed (Gaussian, `smoothing_sigma_px`);
-//    its pixel noise σ_n is estimated from the median absolute difference
-//    between image and smoothed image (scaled for the Gaussian so that it is
-//    unbiased for white noise); the background level b is the median grey and
-//    the peak p the brightest smoothed pixel. Without a contrast p − b of at
-//    least `min_contrast_sigma`·σ_n (and `min_contrast_grey`) the frame has no
-//    lamp. Otherwise the mask is the smoothed image above b + ½(p − b), and
-//    each blob that passes the shape tests below is re-thresholded locally at
-//    half its own peak over its own surroundings (the median of a ring
-//    around it): the half-maximum contour of a blurred disc is its true edge,
-//    so the centroid does not depend on exposure or on a neighbouring lamp;
-//    a blob without `min_contrast_sigma`·σ_n over its surroundings is dropped.
+//    image, so that another camera, exposure, lamp or building does not lose
+//    the lamps. The image is smoothed (Gaussian, `smoothing_sigma_px`); its
+//    pixel noise σ_n is estimated from the median absolute difference between
+//    image and smoothed image (scaled for the Gaussian so that it is unbiased
+//    for white noise); d is its darkest level (1st percentile) and p its
+//    brightest smoothed pixel. A lamp needs a contrast C over its own
+//    surroundings of at least `min_contrast_sigma`·σ (σ the smoothed image's
+//    noise) and `min_contrast_grey`. Candidates are the blobs above a ladder
+//    of levels from p down to d, at most C/2 apart (at most 16 levels), from
+//    the top down — no single level relative to the frame finds every lamp
+//    when the brightest thing in view is not a lamp, lamps differ in
+//    brightness or vignetting darkens some below the middle of the ceiling.
+//    Each candidate is re-thresholded locally at half its own peak (the 90th
+//    percentile of its pixels, not the noise's maximum) over its own
+//    surroundings (the median of a window around it): the half-maximum
+//    contour of a blurred lamp is its true edge, so the centroid depends
+//    neither on exposure nor on a halo, a fixture ring or a neighbour; a
+//    blob without contrast C over its surroundings is dropped. A candidate
+//    whose brightest pixel lies in a lamp already found is that lamp again.
 //  * `threshold_mode: absolute` — the first version: the raw image above the
 //    grey level `threshold`.
 //
-// Then outer contours, and blobs are kept that
-//   - have an area within [min_area_px, max_area_px],
-//   - are round: minor/major axis ratio of the second moments ≥ min_roundness
-//     and circularity 4π·area/perimeter² ≥ min_circularity (a square has
-//     π/4 ≈ 0.785 at most; elongated light panels fail the axis ratio),
-//   - do not touch the image border (a cut-off lamp has a biased centre).
+// The lamp's contour (its outer contour) must
+//   - have an area within [min_area_px, the smaller of max_area_px (0: no
+//     absolute limit) and max_area_fraction × the image's area],
+//   - be compact: minor/major axis ratio of the second moments ≥
+//     min_roundness (0.5: lamps up to 2:1 pass; a 4:1 light panel, 0.25, and
+//     lines do not),
+//   - be convex: solidity, area / area of the convex hull, ≥ min_solidity
+//     (discs, squares and rectangles ≈ 1; two lamps run together, a lamp
+//     merged with a panel, ragged noise blobs less),
+//   - optionally, circularity 4π·area/perimeter² ≥ min_circularity (off by
+//     default: disc 1, square π/4 ≈ 0.785, 2:1 rectangle 0.70, and far less
+//     on the pixel staircase of a noisy contour; the first version's 0.8
+//     rejected square lamps),
+//   - not touch the image border (a cut-off lamp has a biased centre),
+// and, in the relative mode, be a lamp rather than a bright patch:
+//   - isolated: little else in its window above its half maximum (a patch
+//     of plain ceiling framed by tile lines has more ceiling beside it),
+//   - an edge all round: the gradient along its contour, in its lowest
+//     tenth, at least 0.35 of its median, and its mean in each eighth of the
+//     contour at least 0.35 of the median eighth's (the part of a panel that
+//     vignetting lifts above a level is bounded on one side by a shallow
+//     fall-off).
 // The blob's centroid (distorted pixel) is undistorted with the camera model.
 //
 // Measurement (kind "bearing3d"): v = b, the unit vector from the camera
@@ -59,9 +82,11 @@ struct LampConfig {
   double min_contrast_sigma = 8.0;  ///< relative mode: lamp peak over its surroundings, in smoothed-noise σ
   double min_contrast_grey = 12.0;  ///< relative mode: … and at least this many grey levels
   double min_area = 12.0;         ///< px²
-  double max_area = 6000.0;       ///< px²
-  double min_roundness = 0.7;     ///< minor / major axis
-  double min_circularity = 0.8;   ///< 4π·area / perimeter²
+  double max_area = 0.0;          ///< px² (0: no absolute limit)
+  double max_area_fraction = 0.1;  ///< largest lamp as a fraction of the image's area
+  double min_roundness = 0.5;     ///< minor / major axis
+  double min_solidity = 0.85;     ///< area / convex hull area
+  double min_circularity = 0.0;   ///< 4π·area / perimeter² (0: no test)
   double pixel_sigma = 0.5;       ///< std of the centroid (px)
 };
 
@@ -89,6 +114,7 @@ class LampExtractor : public Extractor {
     double noise_sigma = 0.0;  ///< estimated pixel noise σ_n (grey levels)
     double smoothed_noise_sigma = 0.0;  ///< σ of the smoothed image's noise
     double background = 0.0;   ///< median grey of the smoothed image
+    double dark = 0.0;         ///< 1st percentile of the smoothed image
     double peak = 0.0;         ///< brightest smoothed pixel
   };
   const ImageStatistics& last_statistics() const { return stats_; }

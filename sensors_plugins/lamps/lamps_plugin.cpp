@@ -12,7 +12,7 @@ mspace::PluginDescriptor describe() {
   d.kind = mspace::PluginKind::Extractor;
   d.description =
       "Ceiling-camera images → 'bearing3d' measurements: unit vectors in the camera frame "
-      "towards bright round blobs (lamps), with their covariance";
+      "towards bright compact blobs (lamps: round, square or up to 2:1), with their covariance";
   d.params = mspace::lamps::LampExtractor::param_specs();
   d.factory = [](const mspace::PluginArgs& args) -> std::unique_ptr<mspace::PluginObject> {
     return std::make_unique<mspace::lamps::LampExtractor>(args);

@@ -52,15 +52,25 @@ struct RenderVariant {
   const char* name;
   double gain = 1.0, offset = 0.0, vignetting = 0.0, noise = 2.0, blur = 0.7;
   double lamp_grey = 255.0, lamp_radius = 0.10, tile_darkening = 30.0, distortion_scale = 1.0;
+  // Other lamps and other cameras (ceiling_world.hpp, ceiling_renderer.hpp).
+  ceiling_render::LampShape lamp_shape = ceiling_render::LampShape::Disc;
+  double lamp_aspect = 1.0, lamp_grey_spread = 0.0, lamp_falloff = 0.0;
+  double ring_width = 0.0, ring_grey = 70.0, halo_grey = 0.0, halo_width = 0.1;
+  double panel_grey = 238.0;
+  bool lamps = true;
+  double scale = 1.0;  ///< resolution: times 320×240
+  int supersampling = 2, jpeg_quality = 0;
 
   ceiling_render::RenderSettings settings() const {
-    ceiling_render::RenderSettings s{ceiling_render::default_camera()};
+    ceiling_render::RenderSettings s{ceiling_render::scaled_camera(ceiling_render::default_camera(), scale)};
     for (double& k : s.camera.distortion) k *= distortion_scale;
     s.gain = gain;
     s.offset = offset;
     s.vignetting = vignetting;
     s.noise_sigma = noise;
     s.blur_sigma = blur;
+    s.supersampling = supersampling;
+    s.jpeg_quality = jpeg_quality;
     return s;
   }
   ceiling_render::Appearance appearance() const {
@@ -68,6 +78,16 @@ struct RenderVariant {
     a.lamp_grey = lamp_grey;
     a.lamp_radius = lamp_radius;
     a.tile_line_darkening = tile_darkening;
+    a.lamps = lamps;
+    a.lamp_shape = lamp_shape;
+    a.lamp_aspect = lamp_aspect;
+    a.lamp_grey_spread = lamp_grey_spread;
+    a.lamp_falloff = lamp_falloff;
+    a.ring_width = ring_width;
+    a.ring_grey = ring_grey;
+    a.halo_grey = halo_grey;
+    a.halo_width = halo_width;
+    a.fixture_grey = panel_grey;
     return a;
   }
 };

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "camera_test_support.hpp"
+#include "lamp_scoring.hpp"
 
 namespace mspace {
 namespace {
@@ -20,11 +20,10 @@ using lamps::LampConfig;
 using lamps::LampExtractor;
 using lamps::ThresholdMode;
 
-constexpr double kDegree = std::numbers::pi / 180.0;
-
-double angle_between(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::atan2(a.cross(b).norm(), a.dot(b));
-}
+using camera_test::kDegree;
+using camera_test::LampScore;
+using camera_test::print_score;
+using camera_test::score_lamps;
 
 TEST(Lamps, BearingCovarianceIsTheProjectedPixelNoise) {
   const camera::CameraModel cam = ceiling_render::default_camera();
@@ -42,67 +41,6 @@ TEST(Lamps, BearingCovarianceIsTheProjectedPixelNoise) {
   EXPECT_NEAR(off.v.norm(), 1.0, 1e-15);
   EXPECT_NEAR((off.C_v * off.v).norm(), 0.0, 1e-18);
   EXPECT_NEAR((off.C_v - off.C_v.transpose()).norm(), 0.0, 1e-18);
-}
-
-/// Detections of one extractor on rendered frames of the route, scored
-/// against the world's true lamps.
-struct LampScore {
-  int expected = 0;          ///< lamps whose whole disc is in view (3 px margin)
-  int found = 0;             ///< of those, detected within 0.5°
-  int detections = 0;
-  int false_detections = 0;  ///< detections within 0.5° of no lamp
-  double worst = 0.0, sum = 0.0;  ///< bearing errors of the found lamps (rad)
-  double recall() const { return expected > 0 ? static_cast<double>(found) / expected : 0.0; }
-  double precision() const {
-    return detections > 0 ? 1.0 - static_cast<double>(false_detections) / detections : 1.0;
-  }
-  double mean_error() const { return found > 0 ? sum / found : 0.0; }
-};
-
-LampScore score_lamps(const CeilingWorld& world, const CeilingRenderer& renderer, LampExtractor& extractor,
-                      std::size_t stride) {
-  const camera::CameraModel& cam = renderer.settings().camera;
-  LampScore s;
-  std::uint64_t frame = 0;
-  for (const Pose6& x_mr : camera_test::route_poses(stride)) {
-    std::vector<Measurement> seen;
-    extractor.extract_image(renderer.render(x_mr, frame++).view(), cam, seen);
-    s.detections += static_cast<int>(seen.size());
-    // A detection is false unless it points at some lamp (in view or partly cut off).
-    for (const Measurement& m : seen) {
-      const bool at_a_lamp =
-          std::any_of(world.lamps().begin(), world.lamps().end(), [&](const auto& lamp) {
-            return angle_between(m.v, camera_test::in_camera(lamp.centre, x_mr, cam)) <
-                   0.5 * kDegree;
-          });
-      s.false_detections += at_a_lamp ? 0 : 1;
-    }
-    for (const ceiling_render::Lamp& lamp : world.lamps()) {
-      const Eigen::Vector3d p = camera_test::in_camera(lamp.centre, x_mr, cam);
-      Eigen::Vector2d uv;
-      // Expected: the whole disc is in view with a 3 px margin.
-      const double radius_px = cam.focal() * lamp.radius / p.z() * 1.2;
-      if (!cam.project(p, uv) || uv.x() < radius_px + 3 || uv.y() < radius_px + 3 ||
-          uv.x() > cam.width - radius_px - 4 || uv.y() > cam.height - radius_px - 4) {
-        continue;
-      }
-      ++s.expected;
-      double best = 1.0;
-      for (const Measurement& m : seen) best = std::min(best, angle_between(m.v, p));
-      if (best > 0.5 * kDegree) continue;
-      ++s.found;
-      s.worst = std::max(s.worst, best);
-      s.sum += best;
-    }
-  }
-  return s;
-}
-
-void print_score(const char* name, const LampScore& s) {
-  std::printf("lamps %-34s recall %3d/%3d = %.3f  precision %.3f (%d of %d false)  bearing error mean %.4f "
-              "worst %.4f deg\n",
-              name, s.found, s.expected, s.recall(), s.precision(), s.false_detections, s.detections,
-              s.mean_error() / kDegree, s.worst / kDegree);
 }
 
 TEST(Lamps, FindsTheRenderedLampsWithSmallBearingErrors) {
