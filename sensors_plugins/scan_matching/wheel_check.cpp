@@ -1,6 +1,8 @@
 // wheel_check.cpp — see wheel_check.hpp.
 #include "wheel_check.hpp"
 
+#include "scan_matcher.hpp"
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
@@ -104,12 +106,7 @@ Eigen::Matrix3d WheelModel::covariance(const Eigen::Vector3d& increment, double 
 
 Eigen::Vector3d WheelModel::correct_along(const std::vector<Eigen::Vector3d>& steps) const {
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
-  for (const Eigen::Vector3d& w : steps) {
-    const Eigen::Vector3d u = correct(w);
-    const double c = std::cos(p[2]), s = std::sin(p[2]);
-    p += Eigen::Vector3d(c * u[0] - s * u[1], s * u[0] + c * u[1], u[2]);
-  }
-  p[2] = std::remainder(p[2], 2.0 * std::numbers::pi);
+  for (const Eigen::Vector3d& w : steps) p = compose(p, correct(w));  // scan_matcher.hpp's planar ⊕
   return p;
 }
 
