@@ -226,6 +226,51 @@ Footprint footprint(const FeatureShape& s) {
   return f;
 }
 
+/// The point blocks of a, rotated by θ, lie as b's do up to sliding along
+/// the lines between them: every vector between two point blocks of a,
+/// rotated, points the way of b's, and departs from its line by at most
+/// `tolerance` (m) plus `angle_slack` (rad) of its length (blocks closer
+/// than 1 mm in either say nothing). This refuses a segment the other way
+/// round and two lines that meet at a corner, whose residual, with the
+/// sliding of each copy's unmeasured end projected out, can vanish.
+bool same_arrangement(const FeatureShape& a, const FeatureShape& b, double theta, double tolerance,
+                      double angle_slack) {
+  const CoordLayout& layout = *b.layout;
+  const Eigen::Matrix2d R = rotation(theta);
+  for (int i = 0; i < layout.num_blocks(); ++i) {
+    if (!is_point(layout.kind(i))) continue;
+    for (int j = i + 1; j < layout.num_blocks(); ++j) {
+      if (!is_point(layout.kind(j))) continue;
+      const Eigen::Vector2d da = R * (a.x.segment<2>(layout.offset(j)) - a.x.segment<2>(layout.offset(i)));
+      const Eigen::Vector2d db = b.x.segment<2>(layout.offset(j)) - b.x.segment<2>(layout.offset(i));
+      const double la = da.norm(), lb = db.norm();
+      if (la < 1e-3 || lb < 1e-3) continue;
+      if (da.dot(db) < 0.0) return false;
+      const double off_line = std::abs(da.x() * db.y() - da.y() * db.x()) / lb;  // |da × b̂|
+      if (off_line > tolerance + angle_slack * la) return false;
+    }
+  }
+  return true;
+}
+
+/// Where a pair's residual projects sliding out (symmetry directions: an end
+/// point not measured may lie anywhere along its line), it cannot tell two
+/// copies of one object from two objects on one line — a wall and the next
+/// one past a door — nor from one object with its point blocks the other way
+/// round (a segment whose start lies where the other's end does). Such pairs
+/// are taken as one object only when, at motion T, their footprints overlap
+/// (centres no further apart than the radii plus `margin`) and their point
+/// blocks lie the same way (same_arrangement, to `margin` and
+/// `angle_slack`).
+/// Pairs that slide nothing are decided by their residual alone.
+bool same_place(const FeatureShape& a, const Footprint& fa, const FeatureShape& b, const Footprint& fb,
+                const PlanarMotion& T, double margin, double angle_slack) {
+  if (a.free.cols() == 0 && b.free.cols() == 0) return true;
+  if (!fa.placed || !fb.placed) return true;
+  if ((T.apply(fa.centre) - fb.centre).norm() > fa.radius + fb.radius + margin) return false;
+  return same_arrangement(a, b, T.theta, margin, angle_slack);
+}
+
 /// χ² quantiles by dimension, computed once.
 class Chi2Table {
  public:
@@ -306,6 +351,8 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   o.cell = std::max(o.cell, o.max_translation / 40.0);
   o.rotation_step = std::max(o.rotation_step, o.max_rotation / 30.0);
   Chi2Table chi2(o.probability);
+  // same_place's margin: the local map's own distortion, 3σ.
+  const double overlap_margin = 3.0 * o.floor_sigma;
 
   // Candidate partners: same type and close enough for some motion in the window.
   std::vector<Footprint> local_fp, old_fp;
@@ -395,8 +442,14 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
           const VecN<MaxN> e = res.r + M * t0;
           if (m > 1 && e.dot(W.solve(e)) > chi2(m - 1)) continue;
           if (t0.norm() > o.max_translation) continue;
+          if (!same_arrangement(local[i], old[j], theta, overlap_margin, half_step)) continue;
+          // Only where the two overlap (same_place), a cell of slack.
+          const double overlap = local_fp[i].radius + fj.radius + overlap_margin + o.cell;
           const double reach = std::sqrt(o.max_translation * o.max_translation - t0.squaredNorm());
-          for (double s = -reach; s <= reach; s += 0.5 * o.cell) vote(t0 + s * v, voter);
+          for (double s = -reach; s <= reach; s += 0.5 * o.cell) {
+            const Eigen::Vector2d t = t0 + s * v;
+            if ((turned + t - fj.centre).norm() <= overlap) vote(t, voter);
+          }
         }
       }
     }
@@ -437,9 +490,13 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     std::vector<std::tuple<double, int, int, std::size_t>> gated;
     std::vector<Residual<MaxN>> kept_res;
     Residual<MaxN> r;
+    const double margin = overlap_margin + (coarse ? o.cell : 0.0);
     for (std::size_t i = 0; i < local.size(); ++i)
       for (std::size_t k = 0; k < partners[i].size(); ++k) {
         const int j = partners[i][k];
+        if (!same_place(local[i], local_fp[i], old[static_cast<std::size_t>(j)], old_fp[static_cast<std::size_t>(j)],
+                        T, margin, coarse ? half_step : 0.0))
+          continue;
         // A pair the gate below must refuse is dropped before S is formed:
         // d² = rᵀS⁻¹r ≥ |r|² / λ_max(S) ≥ |r|² / trace(S), so |r|² >
         // χ²·trace(S) already decides it (an exact test, not a heuristic).

@@ -3,6 +3,7 @@
 #include "problem_factor.hpp"
 
 #include <algorithm>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -527,6 +528,12 @@ void Problem::warp(const std::function<std::optional<PlanarMotion>(std::size_t r
     if (mf.state_idx.empty()) continue;
     targets.emplace_back(&mf, T.apply(mf.feature->layout(), mf.feature->coords()));
   }
+  // Each pose node's rigid motion (none: it stays).
+  const auto motion_of_node = [&](int node) -> std::optional<PlanarMotion> {
+    if (pose_node_index(node) == 0) return current;
+    return node_motion(records_[static_cast<std::size_t>(node)]);
+  };
+  const Eigen::VectorXd acc_before = acc_;
   // Poses move exactly in one retraction (they are added coordinate-wise);
   // features through their M-space, whose B changes as they turn.
   constexpr int kPasses = 5;
@@ -554,6 +561,45 @@ void Problem::warp(const std::function<std::optional<PlanarMotion>(std::size_t r
       }
     }
     retract(delta);
+  }
+  // A linear factor (frozen, or an extension's prior) whose variables the
+  // warp moved all together — its pose node rigidly, its rows with their
+  // features — moves its linearisation point with them: what it measures
+  // is relative (a feature seen from a pose), so the move changes nothing
+  // it knows, while its linearisation, taken at the old place, would see a
+  // rotation of several degrees through its second-order error (centimetres
+  // at a few metres' lever) and pull the map out of shape. A factor that
+  // ties a moved variable to one that stayed keeps its point: that is the
+  // tension the closure resolves.
+  constexpr double kTogetherRad = 0.1 * 3.14159265358979 / 180.0, kTogetherM = 0.01;
+  std::map<int, PlanarMotion> row_motion;  // estimator row → its feature's motion
+  for (const auto& [index, T] : features)
+    for (int row : (*c_.features)[static_cast<std::size_t>(index)].state_idx) row_motion.emplace(row, T);
+  for (auto& f : factors_) {
+    const bool linear = f->kind == FactorKind::Linear || (f->kind == FactorKind::Observation && !f->live);
+    if (!linear || (f->lin_nodes.empty() && f->lin_rows.empty())) continue;
+    std::vector<PlanarMotion> node_moves;
+    bool all_moved = true;
+    for (int node : f->lin_nodes) {
+      const std::optional<PlanarMotion> T = motion_of_node(node);
+      if (!T) all_moved = false;
+      else node_moves.push_back(*T);
+    }
+    for (int row : f->lin_rows) {
+      const auto it = row_motion.find(row);
+      all_moved = all_moved && it != row_motion.end() && acc_[row] != acc_before[row];
+      // …and with its pose node: the same motion to a centimetre and 0.1°
+      // where the node stands.
+      for (std::size_t i = 0; all_moved && i < node_moves.size(); ++i) {
+        const Eigen::Vector2d at = f->node_base[i].head<2>();
+        all_moved = std::abs(it->second.theta - node_moves[i].theta) < kTogetherRad &&
+                    (it->second.apply(at) - node_moves[i].apply(at)).norm() < kTogetherM;
+      }
+    }
+    if (!all_moved) continue;
+    for (std::size_t i = 0; i < f->lin_nodes.size(); ++i) f->node_base[i] = moved_pose(f->node_base[i], node_moves[i]);
+    for (std::size_t j = 0; j < f->lin_rows.size(); ++j)
+      f->row_base[static_cast<Eigen::Index>(j)] += acc_[f->lin_rows[j]] - acc_before[f->lin_rows[j]];
   }
 }
 

@@ -240,6 +240,18 @@ void Slam::close_loops(const DataStep& data) {
          << " deg (about the robot; best other placement pairs " << match.rival_matches << ")";
     log_->info(what.str());
   }
+  if (log_->enabled(LogLevel::Debug)) {
+    std::ostringstream pairs;
+    pairs.precision(3);
+    for (const auto& [li, oi] : match.best.pairs) {
+      const MapFeature& fa = features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)];
+      const MapFeature& fb = features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)];
+      pairs << " " << fa.id << "(dim " << fa.feature->mspace_dim() << ": " << fa.feature->coords().transpose()
+            << ") -> " << fb.id << "(dim " << fb.feature->mspace_dim() << ": " << fb.feature->coords().transpose()
+            << ");";
+    }
+    log_->debug("step ", step_, ": loop closure pairs (local -> old):", pairs.str());
+  }
   ++stats_.loop_closures;
   stats_.loop_merged += static_cast<std::int64_t>(match.best.pairs.size());
   {

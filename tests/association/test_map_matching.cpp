@@ -6,6 +6,7 @@
 // (a symmetric map), not determined (parallel lines only) or absent.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -171,6 +172,32 @@ TEST(MapMatching, RefusesParallelWallsThatLeaveTheMotionFree) {
   const MapMatch m = match_local_map(local, old, {5, 1}, o);
   EXPECT_FALSE(m.accepted);
   EXPECT_NE(m.reason.find("does not fix"), std::string::npos) << m.reason;
+}
+
+TEST(MapMatching, PairsOnlyCopiesThatOverlapTheSameWayRound) {
+  // A residual that projects sliding ends out sees only lines. Two walls on
+  // one line a door apart, and one wall with its ends the other way round,
+  // pass it; neither is a copy of the old wall. The local map here is the
+  // room without its bottom wall, plus a wall on the bottom wall's line past
+  // a door (x 9–12) and the left wall stored the other way round (both ends
+  // sliding): the five true copies place it, those two are left unpaired.
+  std::mt19937 rng(13);
+  const std::vector<FeatureShape> old = room({0, 0});
+  std::vector<FeatureShape> copies = {old[1], old[2], old[3], old[5], old[6]};
+  copies.push_back(segment({0, 0}, {0, 4}, false, false));   // old[4] the other way round
+  copies.push_back(segment({9, 0}, {12, 0}, false, false));  // past the door on old[0]'s line
+  const PlanarMotion drift{0.04, Eigen::Vector2d(0.8, -0.6), Eigen::Vector2d(3.5, 2.0)};
+  const std::vector<FeatureShape> local = moved(copies, drift, 0.005, rng);
+  MapMatchOptions o;
+  o.max_translation = 3.0;
+  o.max_rotation = 0.2;
+  const MapMatch m = match_local_map(local, old, drift.pivot, o);
+  ASSERT_TRUE(m.accepted) << m.reason;
+  const std::vector<std::pair<int, int>> right = {{0, 1}, {1, 2}, {2, 3}, {3, 5}, {4, 6}};
+  std::vector<std::pair<int, int>> got = m.best.pairs;
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, right);
+  EXPECT_NEAR((m.best.motion.t - inverse(drift).t).norm(), 0.0, 0.05);
 }
 
 TEST(MapMatching, FindsNothingWhereThereIsNothing) {
