@@ -532,6 +532,16 @@ std::optional<SampleObservation> HLineType::sample_observation(int dim, std::uin
   return o;
 }
 
+std::unique_ptr<Feature> HLineType::from_true_shape(const TrueShape& shape, const Pose6& /*x_ms*/) const {
+  if (shape.kind != TrueShape::Kind::Segment) return nullptr;
+  // Horizontal within the constructor's tolerance; a sloped segment is no hline.
+  if (!(std::abs(shape.a.z() - shape.b.z()) <= 1e-9 * (1.0 + std::abs(shape.a.z())))) return nullptr;
+  if (!((shape.b - shape.a).head<2>().norm() > 0.0)) return nullptr;
+  Vec6 x_f;
+  x_f << shape.a, shape.b;
+  return std::make_unique<HLineFeature>(config_, x_f, 3, Vec2(0.5 * (shape.a + shape.b).head<2>()));
+}
+
 std::unique_ptr<Feature> HLineType::restore(const SavedFeature& saved) const {
   if (saved.coords.size() != 6 || saved.extra.size() != 2)
     throw std::invalid_argument("hline: saved state must hold 6 coordinates and the anchor (x, y) (got " +

@@ -197,6 +197,9 @@ class HLineType : public FeatureType {
   /// The sample's line seen by a camera moving along the line's horizontal
   /// normal, 0.13 m per observation (the baseline that dim 1 → 3 needs).
   std::optional<SampleObservation> sample_observation(int dim, std::uint64_t seed, int k) const override;
+  /// A Segment with both ends at one height (a ceiling line) is the line
+  /// through them at dim 3, anchored at its middle; any other shape nullptr.
+  std::unique_ptr<Feature> from_true_shape(const TrueShape& shape, const Pose6& x_ms) const override;
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
 
   const HLineConfig& config() const { return config_; }

@@ -61,6 +61,10 @@
 #include "mspace/params.hpp"
 #include "mspace/plugin.hpp"
 
+namespace mspace::ceiling_render {
+class SceneImageFiles;
+}
+
 namespace mspace::ceiling_lines {
 
 inline constexpr const char* kMeasurementKind = "ceiling_line";
@@ -96,6 +100,11 @@ class CeilingLineExtractor : public Extractor {
   /// file when it cannot be read or its size differs from the intrinsics'.
   void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
 
+  /// A noise-free image of the ceiling renderer from the default camera:
+  /// a few light panels on a flat ceiling; the true shapes are their edges (Segments) (ceiling_render/ceiling_scene.hpp). The image is a
+  /// temporary file that this extractor deletes when it is destroyed.
+  std::optional<SampleScene> sample_scene(std::uint64_t seed) const override;
+
   /// The same on an image already in memory (benchmarks, tests).
   void extract_image(const camera::GreyView& image, const camera::CameraModel& camera,
                      std::vector<Measurement>& out);
@@ -115,6 +124,9 @@ class CeilingLineExtractor : public Extractor {
   LineConfig config_;
   ImageStatistics stats_;
   std::unique_ptr<Cache> cache_;
+  /// The sample scenes' image files, deleted with this extractor. A pointer,
+  /// so that the const sample_scene() can add to it.
+  std::unique_ptr<ceiling_render::SceneImageFiles> scene_files_;
 };
 
 }  // namespace mspace::ceiling_lines
