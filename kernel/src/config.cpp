@@ -28,7 +28,7 @@ constexpr int kFirstAngle = kTheta;
 
 const std::vector<std::string> kTopKeys = {"run",         "source",       "motion", "estimator", "features", "sensors",
                                            "association", "initial_pose", "output", "evaluation", "map"};
-const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor"};
+const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor", "reference"};
 const std::vector<std::string> kRunKeys = {"name",       "log_level", "max_steps", "checkpoint_every",
                                            "health_check_every", "plugin_path", "seed", "skip_steps"};
 const std::vector<std::string> kMapKeys = {"load", "mode", "start", "working_set_rows", "extend_when_unmapped"};
@@ -578,6 +578,7 @@ EvaluationConfig Reader::read_evaluation(const Item* item, const std::vector<Sen
     if (std::find(names.begin(), names.end(), evaluation.ground_truth_sensor) == names.end())
       fail(*f, "no sensor named '" + evaluation.ground_truth_sensor + "' (sensors: " + join(names) + ")");
   }
+  if (const Item* f = find(fields, "reference")) evaluation.reference = text(*f);
   return evaluation;
 }
 
@@ -741,7 +742,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::EndMap;
   out << YAML::EndMap;
 
-  if (!c.evaluation.relations.empty() || !c.evaluation.ground_truth_sensor.empty()) {
+  if (!c.evaluation.relations.empty() || !c.evaluation.ground_truth_sensor.empty() || !c.evaluation.reference.empty()) {
     out << YAML::Key << "evaluation" << YAML::Value << YAML::BeginMap;
     if (!c.evaluation.relations.empty()) {
       out << YAML::Key << "relations" << YAML::Value << c.evaluation.relations;
@@ -749,6 +750,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
     }
     if (!c.evaluation.ground_truth_sensor.empty())
       out << YAML::Key << "ground_truth_sensor" << YAML::Value << c.evaluation.ground_truth_sensor;
+    if (!c.evaluation.reference.empty()) out << YAML::Key << "reference" << YAML::Value << c.evaluation.reference;
     out << YAML::EndMap;
   }
 }

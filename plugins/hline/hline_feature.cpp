@@ -420,7 +420,7 @@ std::vector<ParamSpec> HLineType::param_specs() {
       param_double("max_path_distance", d.max_path_distance,
                    "dense information older than this much path distance is pruned (m)", 0.0),
       param_int("max_observations", d.max_observations, "most observations kept as dense information", 1.0),
-      param_double("match_angle", d.match_angle / kDegree,
+      param_double("match_angle_deg", d.match_angle / kDegree,
                    "while the position is a guess, largest angle between a measured plane and the line's centre (deg)",
                    0.0, 90.0),
       param_double("match_margin", d.match_margin,
@@ -450,7 +450,7 @@ HLineType::HLineType(const PluginArgs& args) {
   config_.min_baseline = p.get_double("min_baseline");
   config_.max_path_distance = p.get_double("max_path_distance");
   config_.max_observations = static_cast<int>(p.get_int("max_observations"));
-  config_.match_angle = p.get_double("match_angle") * kDegree;
+  config_.match_angle = p.get_double("match_angle_deg") * kDegree;
   config_.match_margin = p.get_double("match_margin");
   config_.consistency_probability = p.get_double("consistency_probability");
   config_.inverse_height_sigma = p.get_double("inverse_height_sigma");

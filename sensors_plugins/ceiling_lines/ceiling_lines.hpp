@@ -54,6 +54,7 @@
 #pragma once
 
 #include <memory>
+#include <numbers>
 #include <vector>
 
 #include "image_sequence/camera_model.hpp"
@@ -78,7 +79,7 @@ struct LineConfig {
   double reference_edge = 200.0;  ///< relative mode: E at which the thresholds are canny_low/high
   double min_threshold_sigma = 8.0;  ///< relative mode: canny_high ≥ this many σ of the Sobel noise
   int hough_threshold = 30;       ///< accumulator votes
-  double hough_theta = 0.0349;    ///< rad (2°); segments are refitted afterwards
+  double hough_theta = 2.0 * std::numbers::pi / 180.0;  ///< rad; segments are refitted afterwards
   double min_length = 30.0;       ///< px
   double max_gap = 3.0;           ///< px
   int max_lines = 20;
