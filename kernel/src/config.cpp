@@ -614,6 +614,17 @@ RunConfig Reader::read_document(const YAML::Node& root) {
 
 // ---- Writing the effective configuration -------------------------------
 
+/// A plugin parameter as the effective configuration prints it: 15
+/// significant digits, so that a default a plugin converts from radians
+/// (30° → 29.999999999999996) prints as what it is; any value a user writes
+/// has fewer digits and prints unchanged.
+std::string format_param_number(double v) {
+  if (!std::isfinite(v)) return format_number(v);
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.15g", v);
+  return buf;
+}
+
 void emit_param(YAML::Emitter& out, const ParamValue& value) {
   std::visit(
       [&out](const auto& v) {
@@ -623,12 +634,12 @@ void emit_param(YAML::Emitter& out, const ParamValue& value) {
         } else if constexpr (std::is_same_v<T, std::int64_t>) {
           out << std::to_string(v);
         } else if constexpr (std::is_same_v<T, double>) {
-          out << format_number(v);
+          out << format_param_number(v);
         } else if constexpr (std::is_same_v<T, std::string>) {
           out << v;
         } else {
           out << YAML::Flow << YAML::BeginSeq;
-          for (double x : v) out << format_number(x);
+          for (double x : v) out << format_param_number(x);
           out << YAML::EndSeq;
         }
       },

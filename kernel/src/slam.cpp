@@ -508,7 +508,7 @@ void Slam::update(std::vector<Match>& matches) {
     obs.push_back(std::move(o));
   }
   if (obs.empty()) return;
-  if (config_.association.loop_closing) {
+  if (config_.association.loop_closing && !localizing()) {  // a read-only map closes no loops
     std::vector<std::pair<int, const Candidate*>> matched;
     for (const Match& match : matches) matched.emplace_back(match.feature, &match.candidate);
     note_anchor(matched);

@@ -410,7 +410,7 @@ std::vector<ParamSpec> HLineType::param_specs() {
   return {
       param_int("min_observations", d.min_observations,
                 "observations whose directions agree before the direction enters the M-space", 1.0),
-      param_double("max_direction_spread", d.max_direction_spread / kDegree,
+      param_double("max_direction_spread_deg", d.max_direction_spread / kDegree,
                    "largest deviation of an observation's direction from their mean for it to enter (deg)", 0.0,
                    90.0),
       param_double("initial_height", d.initial_height,
@@ -445,7 +445,7 @@ std::vector<ParamSpec> HLineType::param_specs() {
 HLineType::HLineType(const PluginArgs& args) {
   const Params& p = args.params;
   config_.min_observations = static_cast<int>(p.get_int("min_observations"));
-  config_.max_direction_spread = p.get_double("max_direction_spread") * kDegree;
+  config_.max_direction_spread = p.get_double("max_direction_spread_deg") * kDegree;
   config_.initial_height = p.get_double("initial_height");
   config_.min_baseline = p.get_double("min_baseline");
   config_.max_path_distance = p.get_double("max_path_distance");
