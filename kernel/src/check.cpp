@@ -1,4 +1,5 @@
 // check.cpp — see check.hpp.
+#include <algorithm>
 #include "check.hpp"
 
 #include <filesystem>
@@ -97,15 +98,34 @@ int run_check(const CheckCommand& command, PluginRegistry& registry, std::ostrea
   // object of the checks is gone), so that a usage error stops before any check.
   std::vector<std::shared_ptr<const LoadedPlugin>> plugins;
   std::vector<std::string> load_errors;
-  for (const std::string& target : command.targets) {
+  for (const std::string& target : command.targets)
     plugins.push_back(load_target(target, registry, load_errors.emplace_back()));
-    if (plugins.back()) require_values(*plugins.back()->descriptor, options);
+  // Each --param goes to the targets that declare it (an extractor's
+  // parameter is no business of the feature type checked beside it); one
+  // that no loaded target declares is a usage error.
+  std::vector<conformance::Options> own(plugins.size(), options);
+  for (const auto& [name, value] : options.params) {
+    bool declared = false;
+    std::string known;
+    for (std::size_t i = 0; i < plugins.size(); ++i) {
+      if (!plugins[i]) continue;
+      const auto& specs = plugins[i]->descriptor->params;
+      const bool has = std::any_of(specs.begin(), specs.end(), [&](const ParamSpec& s) { return s.name == name; });
+      declared = declared || has;
+      if (!has) own[i].params.erase(name);
+      known += (known.empty() ? "" : "; ") + plugins[i]->descriptor->name + ":";
+      for (const ParamSpec& s : specs) known += " " + s.name;
+    }
+    if (!declared && std::any_of(plugins.begin(), plugins.end(), [](const auto& p) { return p != nullptr; }))
+      throw CheckUsageError("--param " + name + ": no plugin checked declares it (" + known + ")");
   }
+  for (std::size_t i = 0; i < plugins.size(); ++i)
+    if (plugins[i]) require_values(*plugins[i]->descriptor, own[i]);
   std::vector<conformance::Report> reports;
   int failed = 0;
   for (std::size_t i = 0; i < command.targets.size(); ++i) {
     const std::string& target = command.targets[i];
-    reports.push_back(plugins[i] ? check_target(*plugins[i]->descriptor, target, options)
+    reports.push_back(plugins[i] ? check_target(*plugins[i]->descriptor, target, own[i])
                                  : load_failure(target, load_errors[i]));
     conformance::print_report(reports.back(), out);
     failed += reports.back().passed() ? 0 : 1;

@@ -28,7 +28,7 @@ constexpr int kFirstAngle = kTheta;
 
 const std::vector<std::string> kTopKeys = {"run",         "source",       "motion", "estimator", "features", "sensors",
                                            "association", "initial_pose", "output", "evaluation", "map"};
-const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor"};
+const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor", "reference"};
 const std::vector<std::string> kRunKeys = {"name",       "log_level", "max_steps", "checkpoint_every",
                                            "health_check_every", "plugin_path", "seed", "skip_steps"};
 const std::vector<std::string> kMapKeys = {"load", "mode", "start", "working_set_rows", "extend_when_unmapped"};
@@ -578,6 +578,7 @@ EvaluationConfig Reader::read_evaluation(const Item* item, const std::vector<Sen
     if (std::find(names.begin(), names.end(), evaluation.ground_truth_sensor) == names.end())
       fail(*f, "no sensor named '" + evaluation.ground_truth_sensor + "' (sensors: " + join(names) + ")");
   }
+  if (const Item* f = find(fields, "reference")) evaluation.reference = text(*f);
   return evaluation;
 }
 
@@ -613,6 +614,17 @@ RunConfig Reader::read_document(const YAML::Node& root) {
 
 // ---- Writing the effective configuration -------------------------------
 
+/// A plugin parameter as the effective configuration prints it: 15
+/// significant digits, so that a default a plugin converts from radians
+/// (30° → 29.999999999999996) prints as what it is; any value a user writes
+/// has fewer digits and prints unchanged.
+std::string format_param_number(double v) {
+  if (!std::isfinite(v)) return format_number(v);
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.15g", v);
+  return buf;
+}
+
 void emit_param(YAML::Emitter& out, const ParamValue& value) {
   std::visit(
       [&out](const auto& v) {
@@ -622,12 +634,12 @@ void emit_param(YAML::Emitter& out, const ParamValue& value) {
         } else if constexpr (std::is_same_v<T, std::int64_t>) {
           out << std::to_string(v);
         } else if constexpr (std::is_same_v<T, double>) {
-          out << format_number(v);
+          out << format_param_number(v);
         } else if constexpr (std::is_same_v<T, std::string>) {
           out << v;
         } else {
           out << YAML::Flow << YAML::BeginSeq;
-          for (double x : v) out << format_number(x);
+          for (double x : v) out << format_param_number(x);
           out << YAML::EndSeq;
         }
       },
@@ -741,7 +753,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::EndMap;
   out << YAML::EndMap;
 
-  if (!c.evaluation.relations.empty() || !c.evaluation.ground_truth_sensor.empty()) {
+  if (!c.evaluation.relations.empty() || !c.evaluation.ground_truth_sensor.empty() || !c.evaluation.reference.empty()) {
     out << YAML::Key << "evaluation" << YAML::Value << YAML::BeginMap;
     if (!c.evaluation.relations.empty()) {
       out << YAML::Key << "relations" << YAML::Value << c.evaluation.relations;
@@ -749,6 +761,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
     }
     if (!c.evaluation.ground_truth_sensor.empty())
       out << YAML::Key << "ground_truth_sensor" << YAML::Value << c.evaluation.ground_truth_sensor;
+    if (!c.evaluation.reference.empty()) out << YAML::Key << "reference" << YAML::Value << c.evaluation.reference;
     out << YAML::EndMap;
   }
 }

@@ -28,7 +28,7 @@
 //                  map_covariance: joint | marginal,
 //                  robot_frame: <text for the pose files' headers>,
 //                  grid: {enabled: true, resolution: 0.05, max_range: 20}}
-//   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>}
+//   evaluation:   {relations: <file>, relations_max_dt: 1e-4, ground_truth_sensor: <sensor>, reference: <name>}
 //
 // Plugin parameters are checked against the plugin's descriptor (loaded
 // through the registry) and completed with their defaults. Any scalar value
@@ -136,6 +136,10 @@ struct EvaluationConfig {
   /// Ground truth is the pose of this sensor (x_r ⊕ x_rs), e.g. a GPS antenna
   /// mounted with the laser; empty: the robot pose itself.
   std::string ground_truth_sensor;
+  /// What the source's ground truth is when it is not the truth (e.g.
+  /// "GMapping" for corrected poses, "GPS"): the picture's legend and the
+  /// summary name it; empty: the truth.
+  std::string reference;
 };
 
 /// The occupancy grid written from the range scans (occupancy_grid.hpp).

@@ -471,6 +471,8 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     y << YAML::Key << "estimate_file" << YAML::Value
       << (sensor.empty() ? std::string("trajectory.tum") : "trajectory_" + sensor + ".tum");
     y << YAML::Key << "reference_file" << YAML::Value << "ground_truth.tum";
+    if (!slam.config().evaluation.reference.empty())
+      y << YAML::Key << "reference" << YAML::Value << slam.config().evaluation.reference;
     y << YAML::Key << "alignment" << YAML::Value << "SE(2), least squares over the compared positions";
     emit_trajectory_errors(y, e);
     y << YAML::Key << "mean_robot_nees" << YAML::Value << s.mean_nees;
@@ -556,9 +558,12 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
      << " s, extend " << st.seconds_extend << " s";
   if (st.seconds_loops > 0.0) os << ", loop closing " << st.seconds_loops << " s";
   os << " (total " << total << " s)\n";
+  // What the source's ground truth is: the truth, or a named reference.
+  const std::string& reference = slam.config().evaluation.reference;
+  const std::string versus = reference.empty() ? std::string("ground truth") : "the reference (" + reference + ")";
   if (s.errors) {
     const TrajectoryErrors& e = *s.errors;
-    os << "  vs ground truth (" << e.matched << " poses): ";
+    os << "  vs " << versus << " (" << e.matched << " poses): ";
     print_trajectory_errors(os, e);
     os << ", mean robot NEES " << s.mean_nees << " (" << s.nees_dof << " dof)\n";
   }
@@ -572,7 +577,7 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     const RunSummary::DeadReckoning& d = *s.dead_reckoning;
     os << "  dead reckoning (odometry only; " << d.odometry << "):\n";
     if (d.errors) {
-      os << "    vs ground truth (" << d.errors->matched << " poses): ";
+      os << "    vs " << versus << " (" << d.errors->matched << " poses): ";
       print_trajectory_errors(os, *d.errors);
       os << "\n";
     }

@@ -284,7 +284,13 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     row += 18;
   };
   legend("estimated trajectory", {200, 80, 30});
-  if (!slam.ground_truth().empty()) legend(positions_only ? "reference positions (dots)" : "true trajectory", {60, 170, 60});
+  if (!slam.ground_truth().empty()) {
+    // A reference that is not the truth (evaluation.reference) is named as what it is.
+    const std::string& reference = slam.config().evaluation.reference;
+    std::string label = positions_only ? "reference positions (dots)" : "true trajectory";
+    if (!reference.empty()) label = "reference: " + reference + (positions_only ? " (dots)" : "");
+    legend(label, {60, 170, 60});
+  }
   if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
   legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
   // One line per feature type: how many, and at which M-space dimensions.

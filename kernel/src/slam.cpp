@@ -508,6 +508,11 @@ void Slam::update(std::vector<Match>& matches) {
     obs.push_back(std::move(o));
   }
   if (obs.empty()) return;
+  if (config_.association.loop_closing && !localizing()) {  // a read-only map closes no loops
+    std::vector<std::pair<int, const Candidate*>> matched;
+    for (const Match& match : matches) matched.emplace_back(match.feature, &match.candidate);
+    note_anchor(matched);
+  }
   stats_.updates += static_cast<std::int64_t>(obs.size());
   const Eigen::VectorXd dx = localizing() ? consider_update(obs) : estimator_update(obs, "update");
 
@@ -587,7 +592,6 @@ void Slam::apply_correction(const Eigen::VectorXd& dx) {
 
 void Slam::add_dense_information(std::vector<ReadingWork>& work) {
   if (localizing()) return;  // the map is read-only: no evidence added, no features created
-  int anchors = 0;  // matches with features of the old map (loop closing's window)
   for (ReadingWork& w : work) {
     const SensorView view = sensor_view(w.sensor, w.t);  // after the update
     for (const Match& match : w.matches) {
@@ -597,8 +601,6 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
               [&] { mf.feature->add_dense_information(w.measurements[match.measurement], view); });
       mf.last_seen_step = step_;
       mf.last_seen_path = path_distance_;
-      if (mf.feature->mspace_dim() > 0 && mf.created_path < path_distance_ - config_.association.loop_min_gap_path)
-        ++anchors;
       mf.last_sensor = w.sensor;
       mf.last_seen_t = w.t;
       ++mf.times_matched;
@@ -635,8 +637,6 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
       }
     }
   }
-  // Two or more old features matched at once pin the robot to the old map.
-  if (anchors >= 2) last_anchor_path_ = path_distance_;
 }
 
 // ---- Phase 4: extend -------------------------------------------------------

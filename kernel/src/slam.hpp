@@ -125,6 +125,8 @@ struct RunStats {
   int nees_dof = 0;
 };
 
+struct Candidate;
+
 class Slam {
  public:
   /// Creates every plugin instance of the configuration.
@@ -270,6 +272,11 @@ class Slam {
   void apply_correction(const Eigen::VectorXd& dx);
   /// Map matching of the local map against the old map (slam_loop_closure.cpp).
   void close_loops(const DataStep& data);
+  /// Whether this step's matches with old-map features pin the robot to the
+  /// old map in every planar direction (slam_loop_closure.cpp); called by
+  /// update() before it corrects, when loop closing is on.
+  /// `matched`: (feature index, its candidate) of each match.
+  void note_anchor(const std::vector<std::pair<int, const Candidate*>>& matched);
   void check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths, const DataStep& data);
   /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
   bool relinearize(bool end_of_data);
@@ -337,10 +344,10 @@ class Slam {
   std::vector<double> record_path_;  ///< path distance of every trajectory record
   double last_loop_attempt_path_ = -1e300;
   std::int64_t last_loop_local_signature_ = 0;  ///< the local map of the last search
-  /// Path distance of the last step that matched two or more features
-  /// created over loop_min_gap_path metres earlier: since then the robot has
-  /// seen only what it mapped itself on the way, so its drift against the
-  /// old map grew.
+  /// Path distance of the last step whose matches with features created
+  /// over loop_min_gap_path metres earlier fixed the robot's position and
+  /// heading against them (note_anchor): since then its drift against the
+  /// old map may have grown, at least along the directions they left free.
   double last_anchor_path_ = 0.0;
   /// A placement map matching found and has not yet confirmed: a closure is
   /// made only when a later search, with local features this one did not

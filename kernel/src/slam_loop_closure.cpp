@@ -11,9 +11,10 @@
 //              already: a re-entry often re-associates a feature or two before
 //              the duplicates give the place away);
 //   window     3σ of the robot's position and heading plus the drift the
-//              odometry may have had since the robot last matched a feature
-//              older than the local map (its last anchor in the old map):
-//              loop_drift_per_metre (and _deg_per_metre) of that path.
+//              odometry may have had since the robot was last anchored to
+//              the old map (note_anchor: matches with old features that fix
+//              its position and heading): loop_drift_per_metre (and
+//              _deg_per_metre) of that path.
 // A placement is taken only when it is found twice: the next search, after
 // the robot has mapped more of the place, must find the same placement with
 // local features the first did not pair (a local map of a few metres fits
@@ -30,6 +31,9 @@
 #include <numbers>
 #include <sstream>
 
+#include <Eigen/Cholesky>
+
+#include "association.hpp"
 #include "loop_closing.hpp"
 #include "problem.hpp"
 #include "slam.hpp"
@@ -64,6 +68,38 @@ std::pair<double, double> planar_sigmas(const Eigen::MatrixXd& P, const std::vec
 }
 
 }  // namespace
+
+// An anchor: the step's matches with old-map features (created over
+// loop_min_gap_path m ago) fix the robot to the old map as well as an
+// accepted closure must (kMaxMotionSigma*, 1σ) — information Σ J_rᵀ S⁻¹ J_r
+// with S = C_η + J_f P_f J_fᵀ (the old map's own uncertainty counts).
+// Matching two long walls of a corridor again fixes the heading and the
+// offset across it, not the position along it: that is no anchor, and the
+// search window keeps growing with the path.
+void Slam::note_anchor(const std::vector<std::pair<int, const Candidate*>>& matched) {
+  const auto k = static_cast<Eigen::Index>(dofs_.size());
+  Eigen::MatrixXd info = Eigen::MatrixXd::Zero(k, k);
+  bool any = false;
+  for (const auto& [feature, candidate] : matched) {
+    const MapFeature& mf = features_[static_cast<std::size_t>(feature)];
+    if (mf.feature->mspace_dim() == 0 || mf.created_path > path_distance_ - config_.association.loop_min_gap_path)
+      continue;
+    const Candidate& c = *candidate;
+    const Eigen::MatrixXd J_f = c.J_state.rightCols(c.J_state.cols() - k);
+    const Eigen::MatrixXd S = c.C_eta + J_f * checked_marginal(mf.state_idx) * J_f.transpose();
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) continue;
+    const Eigen::MatrixXd J_r = c.J_state.leftCols(k);
+    info += J_r.transpose() * ldlt.solve(J_r);
+    any = true;
+  }
+  if (!any) return;
+  // A tiny ridge keeps directions nothing measured (height, tilt) finite
+  // without touching the planar ones that were measured.
+  const Eigen::MatrixXd cov = (info + 1e-9 * Eigen::MatrixXd::Identity(k, k)).ldlt().solve(Eigen::MatrixXd::Identity(k, k));
+  const auto [sigma_xy, sigma_theta] = planar_sigmas(cov, dofs_);
+  if (sigma_xy <= kMaxMotionSigmaTranslation && sigma_theta <= kMaxMotionSigmaRotation) last_anchor_path_ = path_distance_;
+}
 
 // A closure is right when it puts the robot where the old features say it
 // is: for each pair, the robot's pose relative to its pose when it first saw

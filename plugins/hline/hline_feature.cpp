@@ -410,7 +410,7 @@ std::vector<ParamSpec> HLineType::param_specs() {
   return {
       param_int("min_observations", d.min_observations,
                 "observations whose directions agree before the direction enters the M-space", 1.0),
-      param_double("max_direction_spread", d.max_direction_spread / kDegree,
+      param_double("max_direction_spread_deg", d.max_direction_spread / kDegree,
                    "largest deviation of an observation's direction from their mean for it to enter (deg)", 0.0,
                    90.0),
       param_double("initial_height", d.initial_height,
@@ -420,7 +420,7 @@ std::vector<ParamSpec> HLineType::param_specs() {
       param_double("max_path_distance", d.max_path_distance,
                    "dense information older than this much path distance is pruned (m)", 0.0),
       param_int("max_observations", d.max_observations, "most observations kept as dense information", 1.0),
-      param_double("match_angle", d.match_angle / kDegree,
+      param_double("match_angle_deg", d.match_angle / kDegree,
                    "while the position is a guess, largest angle between a measured plane and the line's centre (deg)",
                    0.0, 90.0),
       param_double("match_margin", d.match_margin,
@@ -445,12 +445,12 @@ std::vector<ParamSpec> HLineType::param_specs() {
 HLineType::HLineType(const PluginArgs& args) {
   const Params& p = args.params;
   config_.min_observations = static_cast<int>(p.get_int("min_observations"));
-  config_.max_direction_spread = p.get_double("max_direction_spread") * kDegree;
+  config_.max_direction_spread = p.get_double("max_direction_spread_deg") * kDegree;
   config_.initial_height = p.get_double("initial_height");
   config_.min_baseline = p.get_double("min_baseline");
   config_.max_path_distance = p.get_double("max_path_distance");
   config_.max_observations = static_cast<int>(p.get_int("max_observations"));
-  config_.match_angle = p.get_double("match_angle") * kDegree;
+  config_.match_angle = p.get_double("match_angle_deg") * kDegree;
   config_.match_margin = p.get_double("match_margin");
   config_.consistency_probability = p.get_double("consistency_probability");
   config_.inverse_height_sigma = p.get_double("inverse_height_sigma");
@@ -530,6 +530,16 @@ std::optional<SampleObservation> HLineType::sample_observation(int dim, std::uin
   o.measurement.v = project_line(x_f, o.x_ms, 500.0);
   o.measurement.C_v = endpoint_covariance(o.measurement.v, 1.0, 5.0, 1.0);
   return o;
+}
+
+std::unique_ptr<Feature> HLineType::from_true_shape(const TrueShape& shape, const Pose6& /*x_ms*/) const {
+  if (shape.kind != TrueShape::Kind::Segment) return nullptr;
+  // Horizontal within the constructor's tolerance; a sloped segment is no hline.
+  if (!(std::abs(shape.a.z() - shape.b.z()) <= 1e-9 * (1.0 + std::abs(shape.a.z())))) return nullptr;
+  if (!((shape.b - shape.a).head<2>().norm() > 0.0)) return nullptr;
+  Vec6 x_f;
+  x_f << shape.a, shape.b;
+  return std::make_unique<HLineFeature>(config_, x_f, 3, Vec2(0.5 * (shape.a + shape.b).head<2>()));
 }
 
 std::unique_ptr<Feature> HLineType::restore(const SavedFeature& saved) const {

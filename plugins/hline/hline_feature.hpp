@@ -82,12 +82,12 @@ namespace mspace::hline {
 
 struct HLineConfig {
   int min_observations = 3;
-  double max_direction_spread = 0.035;  ///< rad (2°)
+  double max_direction_spread = 0.035;  ///< rad (2.005°; the value the ceiling runs were measured with)
   double initial_height = 2.0;          ///< m above the camera
   double min_baseline = 0.5;            ///< m normal to the line
   double max_path_distance = 10.0;      ///< m of path "distance"
   int max_observations = 100;
-  double match_angle = 0.087;  ///< rad (5°)
+  double match_angle = 0.087;  ///< rad (4.985°; the value the ceiling runs were measured with)
   double match_margin = 0.5;   ///< m
   double consistency_probability = 0.99;  ///< of the χ² tests that planes are one line
   double inverse_height_sigma = 0.25;     ///< 1/m, σ of the prior 1/initial_height in those tests
@@ -197,6 +197,9 @@ class HLineType : public FeatureType {
   /// The sample's line seen by a camera moving along the line's horizontal
   /// normal, 0.13 m per observation (the baseline that dim 1 → 3 needs).
   std::optional<SampleObservation> sample_observation(int dim, std::uint64_t seed, int k) const override;
+  /// A Segment with both ends at one height (a ceiling line) is the line
+  /// through them at dim 3, anchored at its middle; any other shape nullptr.
+  std::unique_ptr<Feature> from_true_shape(const TrueShape& shape, const Pose6& x_ms) const override;
   std::unique_ptr<Feature> restore(const SavedFeature& saved) const override;
 
   const HLineConfig& config() const { return config_; }

@@ -573,7 +573,7 @@ std::vector<ParamSpec> WallType::param_specs() {
       param_int("max_observations", d.max_observations, "most observations kept as dense information", 1.0),
       param_double("match_margin", d.match_margin,
                    "a segment must overlap the wall, give or take this much, to match it (m)", 0.0),
-      param_double("min_corner_angle", d.min_corner_angle * 180.0 / std::numbers::pi,
+      param_double("min_corner_angle_deg", d.min_corner_angle * 180.0 / std::numbers::pi,
                    "two walls share a corner only when they cross at this angle or more (deg)", 0.0, 90.0),
   };
 }
@@ -589,7 +589,7 @@ WallType::WallType(const PluginArgs& args) {
   config_.max_path_distance = p.get_double("max_path_distance");
   config_.max_observations = static_cast<int>(p.get_int("max_observations"));
   config_.match_margin = p.get_double("match_margin");
-  config_.min_corner_angle = p.get_double("min_corner_angle") * std::numbers::pi / 180.0;
+  config_.min_corner_angle = p.get_double("min_corner_angle_deg") * std::numbers::pi / 180.0;
   if (config_.max_observations < std::max(config_.min_observations, config_.min_end_observations))
     throw std::invalid_argument("wall: max_observations must be at least min_observations and min_end_observations");
 }

@@ -49,6 +49,7 @@
 #include <array>
 #include <deque>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <vector>
@@ -68,7 +69,7 @@ struct WallConfig {
   double max_path_distance = 10.0; ///< m of path "distance"
   int max_observations = 40;
   double match_margin = 0.5;       ///< m
-  double min_corner_angle = 0.5236; ///< rad (30°): smallest crossing angle for a shared corner
+  double min_corner_angle = 30.0 * std::numbers::pi / 180.0;  ///< rad: smallest crossing angle for a shared corner
 };
 
 enum End : int { kStart = 0, kEnd = 1 };

@@ -215,9 +215,23 @@ void check_estimator_run(Estimator& est, std::uint64_t seed, Recorder& r) {
 
 // ---------------------------------------------------------------- extractor, source
 
+/// spd_ratio of C_v — except for a direction given as a unit vector (|v| = 1,
+/// e.g. the lamps' 'bearing3d'): such a v has no variance along itself, so its
+/// C_v is singular by construction (C_v v = 0) and must be positive definite
+/// on the plane normal to v instead (v vᵀ, scaled, fills the null direction).
+double covariance_ratio(const Measurement& m) {
+  if (m.C_v.rows() != m.v.size() || m.C_v.cols() != m.v.size()) return -1.0;
+  if (m.v.size() >= 2 && std::abs(m.v.norm() - 1.0) <= 1e-9) {
+    const double scale = m.C_v.cwiseAbs().maxCoeff();
+    if (scale > 0.0 && (m.C_v * m.v).norm() <= 1e-9 * scale)
+      return spd_ratio(m.C_v + scale * m.v * m.v.transpose());
+  }
+  return spd_ratio(m.C_v);
+}
+
 bool measurement_ok(const Measurement& m) {
-  return !m.kind.empty() && m.v.size() > 0 && m.v.allFinite() && spd_ratio(m.C_v) > 0 &&
-         m.C_v.rows() == m.v.size() && m.dense.allFinite();
+  return !m.kind.empty() && m.v.size() > 0 && m.v.allFinite() && covariance_ratio(m) > 0 &&
+         m.dense.allFinite();
 }
 
 bool same_measurements(const std::vector<Measurement>& a, const std::vector<Measurement>& b) {
@@ -293,7 +307,8 @@ void check_extractor(PluginObject& object, const Options& options, Recorder& r) 
       ex.extract(*reading, second);
       const auto bad = std::count_if(first.begin(), first.end(), [](const Measurement& m) { return !measurement_ok(m); });
       r.at_most("extractor.measurements", first.empty() ? 1.0 : static_cast<double>(bad), 0,
-                "no measurements, or non-finite v / C_v not symmetric positive definite");
+                "no measurements, or non-finite v / C_v not symmetric positive definite (for a unit vector v: "
+                "on the plane normal to v)");
       r.at_most("extractor.deterministic", same_measurements(first, second) ? 0 : 1, 0,
                 "the same reading gave different measurements");
     });

@@ -10,6 +10,7 @@
 #include <optional>
 #include <opencv2/imgproc.hpp>
 
+#include "ceiling_render/ceiling_scene.hpp"
 #include "image_sequence/read_grey.hpp"
 
 namespace mspace::ceiling_lines {
@@ -402,7 +403,9 @@ std::vector<ParamSpec> CeilingLineExtractor::param_specs() {
 }
 
 CeilingLineExtractor::CeilingLineExtractor(const LineConfig& config)
-    : config_(config), cache_(std::make_unique<Cache>()) {}
+    : config_(config),
+      cache_(std::make_unique<Cache>()),
+      scene_files_(std::make_unique<ceiling_render::SceneImageFiles>()) {}
 
 CeilingLineExtractor::CeilingLineExtractor(const PluginArgs& args)
     : CeilingLineExtractor([&] {
@@ -432,6 +435,10 @@ CeilingLineExtractor::CeilingLineExtractor(const PluginArgs& args)
       }()) {}
 
 CeilingLineExtractor::~CeilingLineExtractor() = default;
+
+std::optional<SampleScene> CeilingLineExtractor::sample_scene(std::uint64_t seed) const {
+  return ceiling_render::panel_scene(seed, *scene_files_);
+}
 
 void CeilingLineExtractor::extract(const SensorReading& reading, std::vector<Measurement>& out) {
   const camera::CameraModel cam = camera::camera_from_reading(reading);

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <utility>
 
 #include "sim_world/sim_random.hpp"
 
@@ -116,6 +118,15 @@ CeilingWorld::CeilingWorld(std::uint64_t seed, const Appearance& appearance)
   add_panel(-5.0, 4.0, true, 1);
   add_panel(4.75, 4.4, false, 2);
   add_panel(7.25, 4.4, false, 2);
+}
+
+CeilingWorld::CeilingWorld(std::vector<Region> regions, std::vector<Fixture> fixtures, std::vector<Lamp> lamps,
+                           const Appearance& appearance)
+    : appearance_(appearance),
+      regions_(std::move(regions)),
+      fixtures_(std::move(fixtures)),
+      lamps_(std::move(lamps)) {
+  if (regions_.empty()) throw std::invalid_argument("ceiling world: at least one region is needed");
 }
 
 std::vector<Eigen::Vector2d> CeilingWorld::route_waypoints() {

@@ -102,6 +102,13 @@ class CeilingWorld {
   /// The world of the file comment; `seed` jitters lamps, panels and greys.
   explicit CeilingWorld(std::uint64_t seed, const Appearance& appearance = {});
 
+  /// A world of the given regions, light panels and lamps, as they are (the
+  /// extractors' sample scenes, ceiling_scene.hpp). A lamp or panel shows on
+  /// the region whose ceiling_z equals its height. Throws
+  /// std::invalid_argument when there is no region.
+  CeilingWorld(std::vector<Region> regions, std::vector<Fixture> fixtures, std::vector<Lamp> lamps,
+               const Appearance& appearance = {});
+
   /// Grey level (0–255, not clamped) seen along the ray from `origin` (which
   /// must lie in free space) in direction `dir` (any length, dir.z > 0 to see
   /// a ceiling).

@@ -10,6 +10,7 @@
 #include <numbers>
 #include <opencv2/imgproc.hpp>
 
+#include "ceiling_render/ceiling_scene.hpp"
 #include "image_sequence/read_grey.hpp"
 
 namespace mspace::lamps {
@@ -378,7 +379,9 @@ std::vector<ParamSpec> LampExtractor::param_specs() {
 }
 
 LampExtractor::LampExtractor(const LampConfig& config)
-    : config_(config), buffers_(std::make_unique<Buffers>()) {}
+    : config_(config),
+      buffers_(std::make_unique<Buffers>()),
+      scene_files_(std::make_unique<ceiling_render::SceneImageFiles>()) {}
 
 LampExtractor::LampExtractor(const PluginArgs& args)
     : LampExtractor([&] {
@@ -405,6 +408,10 @@ LampExtractor::LampExtractor(const PluginArgs& args)
       }()) {}
 
 LampExtractor::~LampExtractor() = default;
+
+std::optional<SampleScene> LampExtractor::sample_scene(std::uint64_t seed) const {
+  return ceiling_render::lamp_scene(seed, *scene_files_);
+}
 
 void LampExtractor::extract(const SensorReading& reading, std::vector<Measurement>& out) {
   const camera::CameraModel cam = camera::camera_from_reading(reading);

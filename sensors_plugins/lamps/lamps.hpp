@@ -69,6 +69,10 @@
 #include "mspace/params.hpp"
 #include "mspace/plugin.hpp"
 
+namespace mspace::ceiling_render {
+class SceneImageFiles;
+}
+
 namespace mspace::lamps {
 
 inline constexpr const char* kMeasurementKind = "bearing3d";
@@ -101,6 +105,11 @@ class LampExtractor : public Extractor {
   /// file when it cannot be read or its size differs from the intrinsics'.
   void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
 
+  /// A noise-free image of the ceiling renderer from the default camera:
+  /// a few round lamps on a flat ceiling; the true shapes are their centres (Points) (ceiling_render/ceiling_scene.hpp). The image is a
+  /// temporary file that this extractor deletes when it is destroyed.
+  std::optional<SampleScene> sample_scene(std::uint64_t seed) const override;
+
   /// The same on an image already in memory (benchmarks, tests).
   void extract_image(const camera::GreyView& image, const camera::CameraModel& camera,
                      std::vector<Measurement>& out);
@@ -123,6 +132,9 @@ class LampExtractor : public Extractor {
   LampConfig config_;
   std::unique_ptr<Buffers> buffers_;
   ImageStatistics stats_;
+  /// The sample scenes' image files, deleted with this extractor. A pointer,
+  /// so that the const sample_scene() can add to it.
+  std::unique_ptr<ceiling_render::SceneImageFiles> scene_files_;
 };
 
 /// The bearing measurement of a blob centroid at the distorted pixel uv.

@@ -30,6 +30,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <numbers>
 #include <vector>
 
 #include "mspace/measurements/line_segment2d.hpp"
@@ -40,13 +41,13 @@ struct LineConfig {
   double range_sigma = 0.01;          ///< range noise std (m), lower bound of σ
   double min_range = 0.05;            ///< shorter ranges are no return (m)
   double max_range = 30.0;            ///< longer ranges count as no return (m)
-  double breakpoint_lambda = 0.1745;  ///< λ of the adaptive breakpoint detector (rad, 10°)
+  double breakpoint_lambda = 10.0 * std::numbers::pi / 180.0;  ///< λ of the adaptive breakpoint detector (rad)
   double split_distance = 0.05;       ///< split/merge threshold (m)
   int min_points = 8;
   double min_length = 0.4;            ///< m
   double max_rms = 0.03;              ///< m
   double depth_jump = 0.15;           ///< m
-  double min_corner_angle = 0.5236;   ///< rad (30°)
+  double min_corner_angle = 30.0 * std::numbers::pi / 180.0;  ///< rad
   double corner_distance = 0.25;      ///< m
   double max_incidence = 1.309;       ///< beams at more than this from the normal are grazing (rad, 75°)
   double distance_sigma_floor = 0.0;  ///< m, added in quadrature to σ_ρ

@@ -324,13 +324,15 @@ TEST(Checkpoint, VictoriaParkSmoother) {
 }
 
 // The rendered ceiling route of tests/ceiling_runs (a CTest fixture renders it):
-// lines and lamps from images, hline and bearing-only points.
-TEST(Checkpoint, CeilingEkfAndCekf) {
+// lines and lamps from images, hline and bearing-only points, under every
+// estimator (the smoother: bearing-only points' and lines' factors frozen at
+// their extensions, the camera's own pose nodes).
+TEST(Checkpoint, CeilingEveryEstimator) {
   if (!fs::exists(fs::path(MSPACE_CEILING_ROUTE) / "odometry.csv"))
     GTEST_SKIP() << "the rendered ceiling route is not at " << MSPACE_CEILING_ROUTE
                  << " (the CTest fixture render_ceiling_route makes it)";
   setenv("MSPACE_CEILING", MSPACE_CEILING_ROUTE, 1);
-  for (const char* estimator : {"ekf", "cekf"}) {
+  for (const char* estimator : {"ekf", "cekf", "smoother"}) {
     SCOPED_TRACE(estimator);
     expect_resume_equals_uninterrupted({"ceiling_both.yaml", estimator, 200, 400, {}});
   }

@@ -621,6 +621,31 @@ TEST_F(SimRun, GroundTruthSensorMustNameASensor) {
   }
 }
 
+// A reference that is not the truth (evaluation.reference) is named as what
+// it is: the printed summary compares "vs the reference (…)", for the
+// estimate and the dead reckoning, and summary.yaml says which reference.
+TEST_F(SimRun, ANamedReferenceIsCalledWhatItIs) {
+  RunConfig c = config();
+  c.max_steps = 300;
+  c.evaluation.reference = "GMapping";
+  Slam slam(c, registry_);
+  RunOptions options;
+  options.progress = false;
+  options.write_outputs = true;
+  const RunResult result = run_to_end(slam, options);
+  const std::string printed = format_summary(result.summary, slam);
+  EXPECT_NE(printed.find("  vs the reference (GMapping) ("), std::string::npos) << printed;
+  EXPECT_NE(printed.find("    vs the reference (GMapping) ("), std::string::npos) << printed;
+  EXPECT_EQ(printed.find("vs ground truth"), std::string::npos) << printed;
+  const YAML::Node yaml = YAML::LoadFile((out_ / "summary.yaml").string());
+  EXPECT_EQ(yaml["ground_truth"]["reference"].as<std::string>(), "GMapping");
+  // …and the configuration reads and writes the key.
+  std::ifstream in(kConfig);
+  std::stringstream text;
+  text << in.rdbuf() << "\nevaluation:\n  reference: GPS\n";
+  EXPECT_EQ(parse_config(text.str(), "sim.yaml", registry_).evaluation.reference, "GPS");
+}
+
 // Evaluating at a sensor: the estimate is compared as x_r ⊕ x_rs. The
 // simulator's ground truth is the robot origin, so with a sensor mounted
 // 0.5 m ahead the robot-frame ATE stays small and the sensor-frame ATE shows
