@@ -15,7 +15,10 @@
 // symmetric 1 (the deliberately symmetric plan): 1 closure, 0 false, 4
 // refused as ambiguous, ATE 1.298 → 1.408 m. Re-measured 2026-11-25 with the
 // confirmation step: symmetric 1: 0 closures, 6 refused as ambiguous, ATE
-// 1.298 m either way; long_loop 2: 0 closures, 56 refused, ATE 5.242 m. The assertions are the
+// 1.298 m either way; long_loop 2: 0 closures, 56 refused, ATE 5.242 m. Re-measured 2026-11-28 after
+// the pairing, warp and anchor changes (README, "Why right closures made maps worse"): ring 1: 1
+// closure, ATE 0.371 → 0.336 m; symmetric 1: 0 closures, 1.298 m; long_loop 2: 1 closure, 0 false,
+// ATE 5.242 → 1.827 m; l_ring 2: 2 closures, 0 false, 1.613 → 1.610 m. The assertions are the
 // property (no false closure, at least one closure where the loop exists, no
 // run worse than without loop closing by more than 10 %), not those figures.
 #include <gtest/gtest.h>
