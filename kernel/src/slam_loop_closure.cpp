@@ -15,10 +15,13 @@
 //              the old map (note_anchor: matches with old features that fix
 //              its position and heading): loop_drift_per_metre (and
 //              _deg_per_metre) of that path.
-// A placement is taken only when it is found twice: the next search, after
+// A placement is taken only when it is found twice: a later search, after
 // the robot has mapped more of the place, must find the same placement with
 // local features the first did not pair (a local map of a few metres fits
 // a wrong place by chance in a corridor with doors at a regular spacing).
+// Searches in between that place nothing, or place it again without new
+// evidence, keep it waiting; an ambiguous search or a different placement
+// drops it.
 // An accepted closure declares each paired local feature a duplicate of its
 // old partner (MapFeature::merged_into: never associated again). With a
 // re-linearising estimator the recent trajectory and local map are first
@@ -202,8 +205,27 @@ void Slam::close_loops(const DataStep& data) {
   for (int i : local_idx) local.push_back(shape(i));
   for (int i : nearby) old.push_back(shape(i));
   const MapMatch match = match_local_map(local, old, here, o);
+  // Whether placement h agrees with the waiting one p: the robot's position
+  // and heading under both within 3σ of their difference (plus the local
+  // map's own distortion, floor_sigma); `moved`, `turned`: how far apart.
+  double moved = 0.0, turned = 0.0;
+  const auto agrees = [&](const PendingClosure& p, const MapMatchHypothesis& h) {
+    const double st = std::hypot(p.sigma_translation, h.sigma_translation);
+    const double sr = std::hypot(p.sigma_rotation, h.sigma_rotation);
+    moved = (p.motion.apply(here) - h.motion.apply(here)).norm();
+    turned = std::abs(wrap_angle(p.motion.theta - h.motion.theta));
+    return moved <= 3.0 * std::hypot(st, o.floor_sigma) && turned <= 3.0 * sr;
+  };
   if (!match.accepted) {
-    pending_closure_ = PendingClosure{};  // a placement waiting for confirmation is not confirmed
+    // A placement waiting for confirmation is dropped when this search found
+    // another one as good (ambiguous) or a different best placement; a
+    // search that placed nothing, or whose best placement is the waiting one
+    // with too little evidence this time, says nothing against it.
+    bool keep = false;
+    if (pending_closure_.active && match.reason.rfind("ambiguous", 0) != 0) {
+      keep = match.best.pairs.empty() || agrees(pending_closure_, match.best);
+    }
+    if (!keep) pending_closure_ = PendingClosure{};
     if (match.reason.rfind("ambiguous", 0) == 0) {
       ++stats_.loop_ambiguous;
       log_->info("step ", step_, ": loop closure refused, ", match.reason, " (", local.size(), " local, ", old.size(),
@@ -220,9 +242,7 @@ void Slam::close_loops(const DataStep& data) {
   // with doors at a regular spacing, a wing like another); the next search,
   // once the robot has mapped more of the place, must find the same
   // placement with local features this one did not pair — independent
-  // evidence. The two agree when the robot's position and heading under
-  // both differ by less than 3σ of their difference (plus the local map's
-  // own distortion, floor_sigma).
+  // evidence (agrees(), above).
   {
     std::vector<int> paired_ids;
     for (const auto& [li, oi] : match.best.pairs)
@@ -230,11 +250,7 @@ void Slam::close_loops(const DataStep& data) {
     const PendingClosure& p = pending_closure_;
     bool same = false, fresh = false;
     if (p.active) {
-      const double st = std::hypot(p.sigma_translation, match.best.sigma_translation);
-      const double sr = std::hypot(p.sigma_rotation, match.best.sigma_rotation);
-      const double moved = (p.motion.apply(here) - match.best.motion.apply(here)).norm();
-      const double turned = std::abs(wrap_angle(p.motion.theta - match.best.motion.theta));
-      same = moved <= 3.0 * std::hypot(st, o.floor_sigma) && turned <= 3.0 * sr;
+      same = agrees(p, match.best);
       fresh = std::any_of(paired_ids.begin(), paired_ids.end(), [&](int id) {
         return std::find(p.local_ids.begin(), p.local_ids.end(), id) == p.local_ids.end();
       });
