@@ -255,8 +255,8 @@ bool same_arrangement(const FeatureShape& a, const FeatureShape& b, double theta
 
 /// Where a pair's residual projects sliding out (symmetry directions: an end
 /// point not measured may lie anywhere along its line), it cannot tell two
-/// copies of one object from two objects on one line — a wall and the next
-/// one past a door — nor from one object with its point blocks the other way
+/// copies of one object from two objects on one line — a segment and the
+/// next one past a gap — nor from one object with its point blocks the other way
 /// round (a segment whose start lies where the other's end does). Such pairs
 /// are taken as one object only when, at motion T, their footprints overlap
 /// (centres no further apart than the radii plus `margin`) and their point

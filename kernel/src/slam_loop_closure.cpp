@@ -76,8 +76,8 @@ std::pair<double, double> planar_sigmas(const Eigen::MatrixXd& P, const std::vec
 // loop_min_gap_path m ago) fix the robot to the old map as well as an
 // accepted closure must (kMaxMotionSigma*, 1σ) — information Σ J_rᵀ S⁻¹ J_r
 // with S = C_η + J_f P_f J_fᵀ (the old map's own uncertainty counts).
-// Matching two long walls of a corridor again fixes the heading and the
-// offset across it, not the position along it: that is no anchor, and the
+// Matching two long parallel lines again fixes the heading and the offset
+// across them, not the position along them: that is no anchor, and the
 // search window keeps growing with the path.
 void Slam::note_anchor(const std::vector<std::pair<int, const Candidate*>>& matched) {
   const auto k = static_cast<Eigen::Index>(dofs_.size());
