@@ -175,7 +175,8 @@ class Reader {
   SensorConfig read_sensor(const Item& item, const std::vector<std::string>& feature_names) const;
   std::vector<std::string> read_feeds(const Item& item, const std::vector<std::string>& feature_names) const;
   AssociationConfig read_association(const Item* item) const;
-  void read_initial_pose(const Item* item, RunConfig& config) const;
+  /// True for `initial_pose: search`.
+  bool read_initial_pose(const Item* item, RunConfig& config) const;
   OutputConfig read_output(const Item* item, const std::string& run_name) const;
   MapConfig read_map(const Item* item) const;
   EvaluationConfig read_evaluation(const Item* item, const std::vector<SensorConfig>& sensors) const;
@@ -533,11 +534,18 @@ AssociationConfig Reader::read_association(const Item* item) const {
   return association;
 }
 
-void Reader::read_initial_pose(const Item* item, RunConfig& config) const {
-  if (item == nullptr) return;
+bool Reader::read_initial_pose(const Item* item, RunConfig& config) const {
+  if (item == nullptr) return false;
+  if (item->node.IsScalar()) {  // `initial_pose: search`: the kidnapped robot
+    if (item->node.Scalar() != "search")
+      fail(*item, "expected {pose: [...], sigma: [...]} or 'search' (find the robot in the loaded map), not '" +
+                      item->node.Scalar() + "'");
+    return true;
+  }
   const std::vector<Item> fields = entries(*item, &kInitialPoseKeys);
   if (const Item* f = find(fields, "pose")) config.initial_pose = pose(*f);
   if (const Item* f = find(fields, "sigma")) config.initial_sigma = pose(*f, 0.0);
+  return false;
 }
 
 OutputConfig Reader::read_output(const Item* item, const std::string& run_name) const {
@@ -605,10 +613,18 @@ RunConfig Reader::read_document(const YAML::Node& root) {
   for (const Item& field : entries(sensors, nullptr)) config.sensors.push_back(read_sensor(field, feature_names));
   if (config.sensors.empty()) fail(sensors, "at least one sensor is needed");
   config.association = read_association(find(sections, "association"));
-  read_initial_pose(find(sections, "initial_pose"), config);
+  const Item* initial_pose = find(sections, "initial_pose");
+  const bool search_pose = read_initial_pose(initial_pose, config);
   config.output = read_output(find(sections, "output"), config.name);
   config.evaluation = read_evaluation(find(sections, "evaluation"), config.sensors);
   config.map = read_map(find(sections, "map"));
+  if (search_pose) {
+    config.map.search_pose = true;
+    // Without a map section the map may come from the command line (--map);
+    // resolve_run_request checks then. A map section that says otherwise is wrong now.
+    const std::string problem = map_config_problem(config.map);
+    if (!problem.empty() && find(sections, "map") != nullptr) fail(*initial_pose, problem);
+  }
   return config;
 }
 
@@ -730,12 +746,16 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "loop_ambiguity_ratio" << YAML::Value << format_number(c.association.loop_ambiguity_ratio);
   out << YAML::EndMap;
 
-  out << YAML::Key << "initial_pose" << YAML::Value << YAML::BeginMap;
-  out << YAML::Key << "pose" << YAML::Value;
-  emit_pose(out, c.initial_pose);
-  out << YAML::Key << "sigma" << YAML::Value;
-  emit_pose(out, c.initial_sigma);
-  out << YAML::EndMap;
+  if (c.map.search_pose) {
+    out << YAML::Key << "initial_pose" << YAML::Value << "search";
+  } else {
+    out << YAML::Key << "initial_pose" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "pose" << YAML::Value;
+    emit_pose(out, c.initial_pose);
+    out << YAML::Key << "sigma" << YAML::Value;
+    emit_pose(out, c.initial_sigma);
+    out << YAML::EndMap;
+  }
 
   out << YAML::Key << "output" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "dir" << YAML::Value << c.output.dir;
@@ -806,6 +826,12 @@ std::string map_config_problem(const MapConfig& map) {
     return "a mapping run starts from an empty map; to map on from '" + map.load +
            "' give mode: extend (or --mode extend), to localize in it mode: localize";
   if (map.start_at_map_end && map.load.empty()) return "start: map_end needs a map to load";
+  if (map.search_pose && map.mode != MapConfig::Mode::Localize)
+    return std::string("initial_pose: search finds the robot in a map it localizes in; this run's map.mode is ") +
+           map_mode_name(map.mode) + " (give --map DIR, or map: {load: DIR, mode: localize})";
+  if (map.search_pose && map.start_at_map_end)
+    return "initial_pose: search and map.start: map_end contradict each other (the one searches the pose, the other "
+           "takes the map's last)";
   return {};
 }
 

@@ -24,6 +24,7 @@
 //                  method: nearest_neighbour | jcbb, jcbb_max_nodes: 100000,
 //                  spatial_index: true, index_cell_size: 0 (m; 0 = the largest sensor max_range)}
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
+//                 or `search` (localize only: the pose is found in the loaded map)
 //   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000,
 //                  map_covariance: joint | marginal,
 //                  robot_frame: <text for the pose files' headers>,
@@ -182,6 +183,10 @@ struct MapConfig {
   /// measurement matching the map, switch to mapping (extend) for the rest
   /// of the run; 0 = never (docs/maps.md §2).
   double extend_when_unmapped = 0.0;
+  /// Localize: `initial_pose: search` — the robot's place in the map is
+  /// unknown (the kidnapped robot) and is found by map matching
+  /// (kernel/src/slam_pose_search.cpp, docs/maps.md §3).
+  bool search_pose = false;
 };
 
 const char* map_mode_name(MapConfig::Mode mode);

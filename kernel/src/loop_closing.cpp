@@ -336,6 +336,10 @@ bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const Pl
 
 namespace {
 
+/// |a − b| as an angle in [0, π]: a search over every heading has ±π on
+/// both ends of its grid, and refinement may carry an angle past them.
+double angle_apart(double a, double b) { return std::abs(std::remainder(a - b, 2.0 * std::numbers::pi)); }
+
 template <int MaxN>
 MapMatch search(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
                 const Eigen::Vector2d& pivot, const MapMatchOptions& options) {
@@ -478,7 +482,7 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   for (const Peak& p : peaks) {
     bool near = false;
     for (const Peak& q : kept)
-      near = near || (std::abs(p.theta - q.theta) <= 1.01 * o.rotation_step && (p.t - q.t).norm() <= 2.01 * o.cell);
+      near = near || (angle_apart(p.theta, q.theta) <= 1.01 * o.rotation_step && (p.t - q.t).norm() <= 2.01 * o.cell);
     if (!near) kept.push_back(p);
     if (static_cast<int>(kept.size()) >= o.max_hypotheses) break;
   }
@@ -553,6 +557,7 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
       h.motion.t += step.tail<2>();
       if (step[0] * step[0] < 1e-10 && step.tail<2>().squaredNorm() < 1e-8) break;
     }
+    h.motion.theta = std::remainder(h.motion.theta, 2.0 * std::numbers::pi);
     pair_up(h.motion, false, h, H, grad);  // the pairing at the refined motion
     if (h.pairs.empty()) continue;
     h.jointly_compatible = h.dof > 0 && h.d2 <= chi2(h.dof);
@@ -597,10 +602,15 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   result.best = verified[best];
   result.best_matches = static_cast<int>(result.best.pairs.size());
   const double same_t = std::max(3.0 * o.cell, 0.5);
+  double rival_moved = 0.0, rival_turned = 0.0;  // how far the rival puts the pivot from the best
   for (const MapMatchHypothesis& h : verified) {
-    const bool different = std::abs(h.motion.theta - result.best.motion.theta) > 2.0 * o.rotation_step ||
+    const bool different = angle_apart(h.motion.theta, result.best.motion.theta) > 2.0 * o.rotation_step ||
                            (h.motion.t - result.best.motion.t).norm() > same_t;
-    if (different && h.jointly_compatible) result.rival_matches = std::max(result.rival_matches, static_cast<int>(h.pairs.size()));
+    if (different && h.jointly_compatible && static_cast<int>(h.pairs.size()) > result.rival_matches) {
+      result.rival_matches = static_cast<int>(h.pairs.size());
+      rival_moved = (h.motion.t - result.best.motion.t).norm();
+      rival_turned = angle_apart(h.motion.theta, result.best.motion.theta) * 180.0 / std::numbers::pi;
+    }
   }
   if (!valid(result.best)) {
     const MapMatchHypothesis& b = result.best;
@@ -619,8 +629,9 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     return result;
   }
   if (result.rival_matches >= o.ambiguity_ratio * result.best_matches) {
-    result.reason = "ambiguous: another placement pairs " + std::to_string(result.rival_matches) + " of the " +
-                    std::to_string(result.best_matches) + " features";
+    result.reason = "ambiguous: another placement (" + std::to_string(rival_moved) + " m, " +
+                    std::to_string(rival_turned) + " deg from the best) pairs " + std::to_string(result.rival_matches) +
+                    " of the " + std::to_string(result.best_matches) + " features";
     return result;
   }
   result.accepted = true;
@@ -637,6 +648,51 @@ MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vect
       if (s.layout != nullptr) largest = std::max(largest, s.layout->size());
   if (largest <= kSmallCoords) return search<kSmallCoords>(local, old, pivot, options);
   return search<Eigen::Dynamic>(local, old, pivot, options);
+}
+
+MapMatch locate_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
+                          const Eigen::Vector2d& robot, MapMatchOptions options) {
+  // The old map's extent: the bounding box of its footprints' centres, and
+  // the disc about the box's centre that holds every footprint.
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(INFINITY), hi = -lo;
+  std::vector<Footprint> fp;
+  for (const FeatureShape& s : old) {
+    fp.push_back(footprint(s));
+    if (!fp.back().placed) continue;
+    lo = lo.cwiseMin(fp.back().centre);
+    hi = hi.cwiseMax(fp.back().centre);
+  }
+  if (!(lo.x() <= hi.x())) {
+    MapMatch none;
+    none.reason = "the map has no placed feature";
+    return none;
+  }
+  const Eigen::Vector2d centre = 0.5 * (lo + hi);
+  double radius = 0.0;
+  for (const Footprint& f : fp)
+    if (f.placed) radius = std::max(radius, (f.centre - centre).norm() + f.radius);
+  // The local map with the robot at the centre: the translation that places
+  // it is then at most `radius` long.
+  const PlanarMotion to_centre{0.0, centre - robot, robot};
+  std::vector<FeatureShape> moved = local;
+  for (FeatureShape& s : moved) s.x = to_centre.apply(*s.layout, s.x);
+  options.max_translation = std::max(radius, options.cell);
+  options.max_rotation = std::numbers::pi;
+  options.rival_window_factor = 1.0;
+  MapMatch match = match_local_map(moved, old, centre, options);
+  // T(p) = R (p + d − c) + c + t = R (p − robot) + robot + (d + t), d = c − robot.
+  match.best.motion = PlanarMotion{match.best.motion.theta, to_centre.t + match.best.motion.t, robot};
+  return match;
+}
+
+bool placements_agree(const PlanarMotion& a, double a_sigma_translation, double a_sigma_rotation,
+                      const MapMatchHypothesis& b, const Eigen::Vector2d& robot, double floor_sigma, double& moved,
+                      double& turned) {
+  const double st = std::hypot(a_sigma_translation, b.sigma_translation);
+  const double sr = std::hypot(a_sigma_rotation, b.sigma_rotation);
+  moved = (a.apply(robot) - b.motion.apply(robot)).norm();
+  turned = std::abs(std::remainder(a.theta - b.motion.theta, 2.0 * std::numbers::pi));
+  return moved <= 3.0 * std::hypot(st, floor_sigma) && turned <= 3.0 * sr;
 }
 
 }  // namespace mspace::kernel

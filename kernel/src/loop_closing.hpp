@@ -136,4 +136,23 @@ struct MapMatch {
 MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
                          const Eigen::Vector2d& pivot, const MapMatchOptions& options);
 
+/// Global localization (the kidnapped robot, docs/maps.md): the placement of
+/// `local` anywhere in `old`, at any heading. The local map is first moved so
+/// that `robot` (its own position) lies at the centre of the old map's
+/// extent; the window is then the disc that holds every old feature, every
+/// heading is searched, and rivals are looked for in the same window (the
+/// whole map: a second place that fits as well makes the answer ambiguous).
+/// Of `options` the window fields are ignored; the motion returned turns
+/// about `robot`.
+MapMatch locate_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
+                          const Eigen::Vector2d& robot, MapMatchOptions options);
+
+/// Whether two placements of one local map agree: the robot's position and
+/// heading under both within 3σ of their difference (σ of each placement,
+/// plus `floor_sigma` for the local map's own distortion). `moved` and
+/// `turned` receive how far apart they put the robot.
+bool placements_agree(const PlanarMotion& a, double a_sigma_translation, double a_sigma_rotation,
+                      const MapMatchHypothesis& b, const Eigen::Vector2d& robot, double floor_sigma, double& moved,
+                      double& turned);
+
 }  // namespace mspace::kernel

@@ -163,9 +163,21 @@ void Slam::load_map() {
       throw fail("estimator '" + config_.estimator.plugin + "' put the map's " + std::to_string(cov.rows) +
                  " rows at " + std::to_string(first) + " (expected " + std::to_string(k) + ")");
   }
+  report.searched = config_.map.search_pose;
+  map_session_ = report;
+  if (config_.map.search_pose) {
+    // The kidnapped robot (slam_pose_search.cpp): the map waits aside while
+    // the run maps in the frame of its first pose, which is the origin.
+    pose_search_ = std::make_unique<PoseSearch>();
+    pose_search_->map_features = std::move(kept);
+    pose_search_->map_shared = std::move(shared);
+    pose_search_->considered = std::move(considered_);
+    x_r_[kX] = x_r_[kY] = x_r_[kTheta] = 0.0;
+    reset_estimator(Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(k)));
+    return;
+  }
   features_ = std::move(kept);
   shared_ = std::move(shared);
-  map_session_ = report;
   associator_.map_changed();
 }
 
@@ -220,13 +232,15 @@ void Slam::watch_for_unmapped(bool matched) {
 std::optional<Slam::MapSessionReport> Slam::map_session_report() const {
   if (!map_session_) return std::nullopt;
   MapSessionReport r = *map_session_;
-  r.added = static_cast<int>(stats_.created);
+  // Features made while the run searched its pose were its own, not the map's.
+  r.added = pose_search_ ? 0 : static_cast<int>(stats_.created - created_while_searching_);
+  const std::vector<MapFeature>& map_now = pose_search_ ? pose_search_->map_features : features_;
   if (considered_) {
     r.covariance_model = considered_->joint() ? "joint" : "feature blocks";
     r.working_set_evictions = considered_->evicted();
   }
   std::unordered_map<int, const MapFeature*> now;
-  for (const MapFeature& mf : features_) now[mf.id] = &mf;
+  for (const MapFeature& mf : map_now) now[mf.id] = &mf;
   for (const auto& [id, state] : loaded_state_) {
     const auto it = now.find(id);
     if (it == now.end() || it->second->feature->mspace_dim() != state.second ||

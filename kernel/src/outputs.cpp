@@ -354,6 +354,28 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
       y << YAML::Key << "switched_to_mapping_at_step" << YAML::Value << m->switched_to_mapping_at_step;
       y << YAML::Key << "switched_at_path_m" << YAML::Value << m->switched_at_path;
     }
+    if (m->searched) {  // initial_pose: search (docs/maps.md §3)
+      y << YAML::Key << "pose_search" << YAML::Value << YAML::BeginMap;
+      y << YAML::Key << "searches" << YAML::Value << m->searches;
+      y << YAML::Key << "localized" << YAML::Value << m->localized.has_value();
+      if (const auto& l = m->localized) {
+        y << YAML::Key << "at_step" << YAML::Value << l->step;
+        y << YAML::Key << "at_time_s" << YAML::Value << l->t;
+        y << YAML::Key << "at_path_m" << YAML::Value << l->path;
+        y << YAML::Key << "pose" << YAML::Value << YAML::Flow << YAML::BeginSeq << l->x << l->y
+          << l->theta * 180.0 / std::numbers::pi << YAML::EndSeq;
+        y << YAML::Key << "local_features_paired" << YAML::Value << l->paired;
+        y << YAML::Key << "local_features" << YAML::Value << l->local;
+        y << YAML::Key << "best_other_placement_pairs" << YAML::Value << l->rival;
+        y << YAML::Key << "placement_sigma_m" << YAML::Value << l->sigma_translation;
+        y << YAML::Key << "placement_sigma_deg" << YAML::Value << l->sigma_rotation * 180.0 / std::numbers::pi;
+        y << YAML::Key << "own_features_discarded" << YAML::Value << l->features_discarded;
+      } else {
+        y << YAML::Key << "last_search" << YAML::Value << m->last_search;
+        y << YAML::Key << "frame" << YAML::Value << "the run's first pose (not the map's)";
+      }
+      y << YAML::EndMap;
+    }
   }
   y << YAML::EndMap;
   y << YAML::Key << "counts" << YAML::Value << YAML::BeginMap;
@@ -527,6 +549,17 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
                ? "; switched from localize to mapping at step " + std::to_string(m->switched_to_mapping_at_step)
                : "")
        << "\n";
+  if (const auto m = slam.map_session_report(); m && m->searched) {
+    if (const auto& l = m->localized)
+      os << "  pose search: localized at step " << l->step << " (" << l->t << " s, " << l->path
+         << " m of travel, search " << m->searches << ") at " << l->x << ", " << l->y << " m, "
+         << l->theta * 180.0 / std::numbers::pi << " deg; " << l->paired << " of " << l->local
+         << " local features paired, best other placement " << l->rival << "\n";
+    else
+      os << "  pose search: NOT LOCALIZED after " << m->searches << " searches ("
+         << (m->last_search.empty() ? "too few features to search with" : m->last_search)
+         << "); the poses are in the frame of the run's first pose, not the map's\n";
+  }
   os << "  measurements " << st.measurements << ", matched " << st.matched << ", used in updates " << st.updates
      << ", features created " << st.created << ", extended " << st.extended << ", tentative pruned " << st.pruned;
   if (st.joined > 0) os << ", shared coordinates " << st.joined;

@@ -40,7 +40,15 @@ std::string sensor_frame_text(const SensorConfig& s) {
          " m/deg, relative to the robot frame)";
 }
 
-std::string map_frame_text(const RunConfig& c) {
+std::string map_frame_text(const Slam& slam) {
+  const RunConfig& c = slam.config();
+  if (const auto m = slam.map_session_report(); m && m->searched) {  // initial_pose: search
+    if (m->localized)
+      return "map frame: the frame of the loaded map " + m->file + "; the run found its pose there at step " +
+             std::to_string(m->localized->step) + " (initial_pose: search) and its earlier poses are moved there too";
+    return "frame of the run's first pose: the run did not find itself in the loaded map " + m->file +
+           " (initial_pose: search), so these poses are NOT in the map's frame";
+  }
   std::string text = "map frame: the frame the run starts in; ";
   if (!c.initial_pose.isZero())
     text += "the robot's initial pose there is initial_pose " + pose_text(c.initial_pose) + " of " +
@@ -61,7 +69,7 @@ std::string pose_file_frame(const Slam& slam, PoseFile which) {
   std::ostringstream h;
   switch (which) {
     case PoseFile::Robot:
-      h << "poses of the " << robot << "\n" << "in the " << map_frame_text(c) << "\n";
+      h << "poses of the " << robot << "\n" << "in the " << map_frame_text(slam) << "\n";
       if (sensor != nullptr)
         h << "ground_truth.tum is of sensor '" << sensor->name << "': compare trajectory_" << sensor->name
           << ".tum with it, not this file\n";
@@ -69,14 +77,14 @@ std::string pose_file_frame(const Slam& slam, PoseFile which) {
     case PoseFile::EvaluatedSensor:
       h << "poses of the " << (sensor != nullptr ? sensor_frame_text(*sensor) : robot) << "\n"
         << "(" << robot << ")\n"
-        << "in the " << map_frame_text(c) << "\n"
+        << "in the " << map_frame_text(slam) << "\n"
         << "the run's ATE is this file against ground_truth.tum: poses paired by time stamp, SE(2) alignment\n";
       break;
     case PoseFile::DeadReckoning:
       h << "dead reckoning: the source's odometry increments through the motion model '" << c.motion.plugin
         << "' from the run's start, no update (summary.yaml's dead_reckoning figures; odometry: "
         << slam.odometry_description() << ")\n"
-        << "poses of the " << robot << "\n" << "in the " << map_frame_text(c) << "\n";
+        << "poses of the " << robot << "\n" << "in the " << map_frame_text(slam) << "\n";
       break;
     case PoseFile::Reference: {
       h << "reference poses from source '" << c.source.instance << "' (plugin '" << c.source.plugin << "') of the "

@@ -174,6 +174,10 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
   if (config_.checkpoint_every > 0 && (config_.map.mode != MapConfig::Mode::Mapping || config_.skip_steps > 0))
     throw ConfigError(config_.file.string() + ": run.checkpoint_every: checkpoints of a run that loads a map or skips "
                       "data steps are not supported yet (a resumed run would not know the map or the skipped steps)");
+  if (config_.map.search_pose) {  // (the YAML reader and the command line check this too)
+    const std::string problem = map_config_problem(config_.map);
+    if (!problem.empty()) throw ConfigError(config_.file.string() + ": " + problem);
+  }
   if (config_.map.mode != MapConfig::Mode::Mapping) load_map();
   skip_data_steps();
 }
@@ -229,18 +233,25 @@ Eigen::VectorXd Slam::shared_value(const SharedCoordinate& c) const {
 }
 
 bool Slam::step() {
-  if (config_.max_steps > 0 && step_ >= config_.max_steps) return relinearize(true);
+  // The data ends before the robot was found in the map (initial_pose:
+  // search): the loaded map goes back in place, the poses stay in the run's frame.
+  const auto end_of_data = [&] {
+    if (pose_search_) install_searched_map(nullptr, 0.0, 0.0);
+    return relinearize(true);
+  };
+  if (config_.max_steps > 0 && step_ >= config_.max_steps) return end_of_data();
   DataStep data;
   auto t0 = Clock::now();
   const bool more = guarded(config_.source.instance, *source_lib_, "next", [&] { return source_->next(data); });
   stats_.seconds_source += seconds_since(t0);
-  if (!more) return relinearize(true);
+  if (!more) return end_of_data();
   ++step_;
   ++stats_.steps;
 
   t0 = Clock::now();
   predict(data);
-  robot_truth_ = robot_truth(data, ground_truth_sensor_, dofs_);
+  // (While initial_pose: search searches, the robot is in a frame of its own: no truth to compare.)
+  robot_truth_ = pose_search_ ? std::nullopt : robot_truth(data, ground_truth_sensor_, dofs_);
   if (problem_ && !data.readings.empty()) problem_->key_pose(trajectory_.size());
   stats_.seconds_predict += seconds_since(t0);
 
@@ -269,7 +280,11 @@ bool Slam::step() {
   }
   stats_.seconds_extend += seconds_since(t0);
   if (!work.empty() && !localizing()) associator_.map_changed();  // features were created, extended, joined
-  if (config_.association.loop_closing && !work.empty() && !localizing()) {
+  if (pose_search_ && !work.empty()) {  // initial_pose: search
+    t0 = Clock::now();
+    search_pose();
+    stats_.seconds_loops += seconds_since(t0);
+  } else if (config_.association.loop_closing && !work.empty() && !localizing()) {
     t0 = Clock::now();
     close_loops(data);
     stats_.seconds_loops += seconds_since(t0);
@@ -884,6 +899,7 @@ void Slam::record(const DataStep& data) {
   evaluated_.push_back({data.t, x_eval, kAllPoseCoords});
   if (!data.ground_truth) return;
   ground_truth_.push_back({data.t, *data.ground_truth, data.ground_truth_known});
+  if (pose_search_) return;  // the pose is in the run's own frame until it is found in the map
 
   // NEES over the coordinates the ground truth knows and the filter estimates.
   const Eigen::MatrixXd J = columns(J_sr, dofs_);

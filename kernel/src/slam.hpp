@@ -176,6 +176,21 @@ class Slam {
     /// mapping (0: it did not) and the path distance then.
     std::int64_t switched_to_mapping_at_step = 0;
     double switched_at_path = 0.0;
+    /// initial_pose: search (slam_pose_search.cpp): the searches made, and
+    /// when, where and on what evidence the robot was localized.
+    struct Localization {
+      std::int64_t step = 0;
+      double t = 0.0, path = 0.0;          ///< data time and path distance (m) then
+      double x = 0.0, y = 0.0, theta = 0.0; ///< the robot's pose in the map then (m, rad)
+      int paired = 0, local = 0;           ///< local-map features paired with the map, of so many
+      int rival = 0;                       ///< pairs of the best clearly different placement
+      double sigma_translation = 0.0, sigma_rotation = 0.0;  ///< of the placement (m, rad, 1σ)
+      int features_discarded = 0;          ///< the run's own features of before, dropped
+    };
+    bool searched = false;  ///< the run was told to search its pose
+    int searches = 0;
+    std::optional<Localization> localized;  ///< empty: not localized
+    std::string last_search;                ///< what the last search found (not localized)
   };
   /// Empty unless the run loaded a map; `changed` is counted now.
   std::optional<MapSessionReport> map_session_report() const;
@@ -294,7 +309,15 @@ class Slam {
   void reset_estimator(const Eigen::MatrixXd& P0);
   /// Discards config_.skip_steps data steps.
   void skip_data_steps();
-  bool localizing() const { return config_.map.mode == MapConfig::Mode::Localize; }
+  /// Localize mode with the robot placed in the map (while initial_pose:
+  /// search is still searching, the run maps in a frame of its own).
+  bool localizing() const { return config_.map.mode == MapConfig::Mode::Localize && !pose_search_; }
+  /// initial_pose: search (slam_pose_search.cpp): looks for the local map in
+  /// the whole loaded map; places the robot when a placement is confirmed.
+  void search_pose();
+  /// Moves the run into the map's frame by `T` (or leaves it where it is:
+  /// null), drops the run's own features and puts the loaded map in place.
+  void install_searched_map(const PlanarMotion* T, double sigma_translation, double sigma_rotation);
   /// Localize mode: one step's observations (robot and map rows) applied as
   /// Schmidt's consider update (considered_map.hpp): the robot is corrected,
   /// the map is not, the robot–map cross-covariance is kept. Returns δx_r.
@@ -372,6 +395,20 @@ class Slam {
   /// in the estimator) and the path distance of the last step that matched.
   std::shared_ptr<const Eigen::MatrixXd> map_joint_;
   double last_matched_path_ = 0.0;
+  /// initial_pose: search, until the robot is placed: the loaded map waits
+  /// here while the run maps in the frame of its first pose.
+  struct PoseSearch {
+    std::vector<MapFeature> map_features;
+    std::vector<SharedCoordinate> map_shared;
+    std::unique_ptr<ConsideredMap> considered;
+    std::vector<FeatureShape> map_shapes;  ///< the map as map matching sees it (made once)
+    double last_search_path = -1e300;
+    std::int64_t last_signature = -1;  ///< of the local map searched last
+    PendingClosure waiting;            ///< a placement found once, to be confirmed
+  };
+  std::unique_ptr<PoseSearch> pose_search_;
+  /// Features the run created while it searched its pose (discarded).
+  std::int64_t created_while_searching_ = 0;
 };
 
 }  // namespace mspace::kernel

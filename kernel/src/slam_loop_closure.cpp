@@ -210,11 +210,7 @@ void Slam::close_loops(const DataStep& data) {
   // map's own distortion, floor_sigma); `moved`, `turned`: how far apart.
   double moved = 0.0, turned = 0.0;
   const auto agrees = [&](const PendingClosure& p, const MapMatchHypothesis& h) {
-    const double st = std::hypot(p.sigma_translation, h.sigma_translation);
-    const double sr = std::hypot(p.sigma_rotation, h.sigma_rotation);
-    moved = (p.motion.apply(here) - h.motion.apply(here)).norm();
-    turned = std::abs(wrap_angle(p.motion.theta - h.motion.theta));
-    return moved <= 3.0 * std::hypot(st, o.floor_sigma) && turned <= 3.0 * sr;
+    return placements_agree(p.motion, p.sigma_translation, p.sigma_rotation, h, here, o.floor_sigma, moved, turned);
   };
   if (!match.accepted) {
     // A placement waiting for confirmation is dropped when this search found

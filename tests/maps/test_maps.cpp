@@ -23,6 +23,7 @@
 #include <functional>
 #include <iostream>
 #include <iterator>
+#include <random>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -577,6 +578,187 @@ TEST(Localize, IntelSecondHalfInTheMapOfTheFirst) {
   ASSERT_TRUE(report.has_value());
   EXPECT_EQ(report->added, 0);
   EXPECT_EQ(report->changed, 0);
+}
+
+// ---------------------------------------------------------------- the kidnapped robot
+
+/// One localize run with `initial_pose: search` (kernel/src/slam_pose_search.cpp):
+/// whether it placed itself, when, and how far from the truth. The map's
+/// frame is the ground truth's in both simulators (their mapping runs start
+/// at the true first pose), so the pose is compared with the truth directly.
+struct Kidnapped {
+  bool localized = false;
+  double seconds = 0.0;        ///< of data before it was placed
+  double position_error = 0.0;  ///< m, at the step it was placed
+  double heading_error = 0.0;   ///< deg
+  double final_error = 0.0;     ///< m, at the last step (placed runs)
+  int searches = 0;
+  std::string last_search;
+};
+
+Kidnapped kidnapped_run(RunConfig c, PluginRegistry& registry, const fs::path& map_dir, std::int64_t skip) {
+  c.map.load = map_dir.string();
+  c.map.mode = MapConfig::Mode::Localize;
+  c.map.search_pose = true;
+  c.skip_steps = skip;
+  Slam slam(c, registry);
+  run_to_end(slam, quiet());
+  const auto report = slam.map_session_report();
+  Kidnapped k;
+  EXPECT_TRUE(report && report->searched);
+  if (!report) return k;
+  EXPECT_EQ(report->added, 0);
+  EXPECT_EQ(report->changed, 0);
+  k.searches = report->searches;
+  k.last_search = report->last_search;
+  const std::vector<StampedPose>& est = slam.trajectory();
+  const std::vector<StampedPose>& truth = slam.ground_truth();
+  const auto error_at = [&](double t) {
+    const auto e = std::find_if(est.begin(), est.end(), [&](const StampedPose& p) { return p.t >= t - 1e-9; });
+    const auto g = std::find_if(truth.begin(), truth.end(), [&](const StampedPose& p) { return p.t >= t - 1e-9; });
+    if (e == est.end() || g == truth.end() || std::abs(e->t - g->t) > 1e-6) {
+      ADD_FAILURE() << "no estimated and true pose at t = " << t;
+      return std::pair<double, double>{INFINITY, INFINITY};
+    }
+    const double dtheta = std::remainder(e->pose[kTheta] - g->pose[kTheta], 2.0 * M_PI);
+    return std::pair<double, double>{(e->pose.head<2>() - g->pose.head<2>()).norm(), std::abs(dtheta) * 180.0 / M_PI};
+  };
+  if (report->localized) {
+    k.localized = true;
+    k.seconds = report->localized->t - est.front().t;
+    std::tie(k.position_error, k.heading_error) = error_at(report->localized->t);
+    k.final_error = error_at(est.back().t).first;
+  }
+  return k;
+}
+
+// The target: 20 random start poses in the mapped area of the
+// simulated world, no pose given: at least 19 localized within 30 s of data,
+// no wrong pose (> 0.5 m) accepted. The map is sim_points' world mapped with
+// noise seed 1; each kidnapped run has its own noise seed and starts at a
+// random step of the two-lap route (the first 300 steps, 30 s, are run).
+TEST(Localize, KidnappedRobotFindsItselfFromTwentyRandomStarts) {
+  set_log_level(LogLevel::Warn);
+  const fs::path map_dir = scratch("kidnap_map");
+  std::int64_t steps = 0;
+  {
+    PluginRegistry registry;
+    Slam slam(load("sim_points.yaml", "ekf", registry, map_dir, 0, sim_world(1, 1.0)), registry);
+    steps = static_cast<std::int64_t>(slam.size_hint());
+    run_to_end(slam, quiet());
+  }
+  ASSERT_GT(steps, 1000);
+  std::mt19937_64 rng(20261128);
+  std::uniform_int_distribution<std::int64_t> start(0, steps - 301);
+  int localized = 0, wrong = 0;
+  double worst = 0.0, slowest = 0.0;
+  for (int i = 0; i < 20; ++i) {
+    const std::int64_t skip = start(rng);
+    PluginRegistry registry;
+    const RunConfig c = load("sim_points.yaml", "ekf", registry, scratch("kidnapped"), 300, sim_world(100 + i, 1.0));
+    const Kidnapped k = kidnapped_run(c, registry, map_dir, skip);
+    std::cout << "[ kidnapped  ] start at step " << skip << ": "
+              << (k.localized ? "localized after " + std::to_string(k.seconds) + " s, error " +
+                                    std::to_string(k.position_error) + " m, " + std::to_string(k.heading_error) +
+                                    " deg; at the end " + std::to_string(k.final_error) + " m"
+                              : "not localized (" + k.last_search + ")")
+              << " [" << k.searches << " searches]\n";
+    if (!k.localized) continue;
+    ++localized;
+    slowest = std::max(slowest, k.seconds);
+    worst = std::max(worst, k.position_error);
+    if (k.position_error > 0.5 || k.heading_error > 5.0 || k.final_error > 0.5) ++wrong;
+  }
+  std::cout << "[ kidnapped  ] " << localized << " of 20 localized (slowest after " << slowest << " s), " << wrong
+            << " wrong; worst position error when placed " << worst << " m\n";
+  EXPECT_GE(localized, 19);
+  EXPECT_EQ(wrong, 0);
+  EXPECT_LE(slowest, 30.0);
+}
+
+// The deliberately symmetric building (four-fold: every room and box is
+// copied by quarter turns) gives every local map four places that fit
+// equally: no start may be placed wrongly, and a run that cannot tell says
+// "not localized" and why.
+TEST(Localize, KidnappedInASymmetricBuildingAcceptsNoWrongPose) {
+  set_log_level(LogLevel::Warn);
+  sim_building::GeneratorSettings settings;
+  settings.plan = "symmetric";
+  const sim_building::Simulation sim = sim_building::simulate(settings);
+  const fs::path data = scratch("symmetric_building");
+  sim_building::write_data_set(sim, data);
+  setenv("MSPACE_SIM_BUILDING", data.c_str(), 1);
+  const auto wheel = [](RunConfig& c) { c.source.params.set("odometry", std::string("wheel")); };
+  const fs::path map_dir = scratch("symmetric_map");
+  std::int64_t steps = 0;
+  {
+    PluginRegistry registry;
+    Slam slam(load("sim_building.yaml", "ekf", registry, map_dir, 0, wheel), registry);
+    steps = static_cast<std::int64_t>(slam.size_hint());
+    run_to_end(slam, quiet());
+  }
+  ASSERT_GT(steps, 400);
+  int localized = 0, wrong = 0, ambiguous = 0;
+  for (int i = 0; i < 5; ++i) {
+    const std::int64_t skip = (i * steps) / 5;
+    PluginRegistry registry;
+    const RunConfig c = load("sim_building.yaml", "ekf", registry, scratch("symmetric_kidnapped"), 300, wheel);
+    const Kidnapped k = kidnapped_run(c, registry, map_dir, skip);
+    std::cout << "[ symmetric  ] start at step " << skip << ": "
+              << (k.localized ? "localized, error " + std::to_string(k.position_error) + " m, " +
+                                    std::to_string(k.heading_error) + " deg"
+                              : "not localized (" + k.last_search + ")")
+              << " [" << k.searches << " searches]\n";
+    if (k.localized) {
+      ++localized;
+      if (k.position_error > 0.5 || k.heading_error > 5.0) ++wrong;
+    } else if (k.last_search.rfind("ambiguous", 0) == 0) {
+      ++ambiguous;
+    }
+  }
+  std::cout << "[ symmetric  ] " << localized << " of 5 localized, " << wrong << " wrong, " << ambiguous
+            << " refused as ambiguous\n";
+  EXPECT_EQ(wrong, 0);
+  EXPECT_GE(ambiguous, 1);  // the search saw the symmetry and said so
+}
+
+TEST(Localize, SearchNeedsAMapToLocalizeIn) {
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  const std::string base = "run: {name: t}\nsource: {plugin: sim_world}\nmotion: {plugin: odometry2d}\n"
+                           "estimator: {plugin: ekf}\nfeatures: {point: {plugin: point}}\n"
+                           "sensors: {laser: {mount: [0,0,0,0,0,0], extractor: {plugin: range_bearing}, feeds: [point]}}\n";
+  const auto error_of = [&](const std::string& text) {
+    try {
+      parse_config(base + text, "t.yaml", registry);
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  // A map section that does not localize: wrong in the file.
+  std::string error = error_of("initial_pose: search\nmap: {load: out/x, mode: extend}\n");
+  EXPECT_NE(error.find("t.yaml:7:"), std::string::npos) << error;
+  EXPECT_NE(error.find("map.mode is extend"), std::string::npos) << error;
+  // No map section: the map may come from the command line (--map), checked
+  // then — and by the run itself for a configuration built in code.
+  {
+    RunConfig c = parse_config(base + "initial_pose: search\n", "t.yaml", registry);
+    EXPECT_TRUE(c.map.search_pose);
+    try {
+      Slam slam(c, registry);
+      ADD_FAILURE() << "a mapping run with initial_pose: search was made";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("map.mode is mapping"), std::string::npos) << e.what();
+    }
+  }
+  error = error_of("initial_pose: guess\n");
+  EXPECT_NE(error.find("initial_pose"), std::string::npos) << error;
+  EXPECT_NE(error.find("'search'"), std::string::npos) << error;
+  error = error_of("initial_pose: search\nmap: {load: out/x, mode: localize, start: map_end}\n");
+  EXPECT_NE(error.find("contradict"), std::string::npos) << error;
+  const RunConfig c = parse_config(base + "initial_pose: search\nmap: {load: out/x, mode: localize}\n", "t.yaml", registry);
+  EXPECT_TRUE(c.map.search_pose);
 }
 
 // ---------------------------------------------------------------- extend
