@@ -360,7 +360,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
       y << YAML::Key << "localized" << YAML::Value << m->localized.has_value();
       if (const auto& l = m->localized) {
         y << YAML::Key << "at_step" << YAML::Value << l->step;
-        y << YAML::Key << "at_time_s" << YAML::Value << l->t;
+        y << YAML::Key << "at_time_s" << YAML::Value << YAML::DoublePrecision(16) << l->t;  // logs stamp in epoch seconds
         y << YAML::Key << "at_path_m" << YAML::Value << l->path;
         y << YAML::Key << "pose" << YAML::Value << YAML::Flow << YAML::BeginSeq << l->x << l->y
           << l->theta * 180.0 / std::numbers::pi << YAML::EndSeq;
