@@ -300,39 +300,60 @@ std::vector<ParamSpec> ImageSequence::param_specs() {
 
 ImageSequence::ImageSequence(const std::string& folder, const std::string& channel, Logger& log,
                              const std::string& laser_channel, const std::string& on_malformed)
-    : folder_(folder), channel_(channel), laser_channel_(laser_channel), malformed_(on_malformed) {
+    : channel_(channel), laser_channel_(laser_channel), malformed_(on_malformed) {
   const fs::path dir(folder);
   if (!fs::is_directory(dir)) throw std::runtime_error(folder + ": not a folder");
-  camera_ = read_camera_yaml((dir / "camera.yaml").string());
+  camera_origin_ = (dir / "camera.yaml").string();
+  camera_ = read_camera_yaml(camera_origin_);
   camera_row_ = camera::reading_row(camera_);
   const std::string frames_csv = (dir / "frames.csv").string();
   std::vector<Frame> frames = read_frames_csv(frames_csv, folder, malformed_);
   check_images(frames, frames_csv);
-  odometry_ = read_odometry_csv((dir / "odometry.csv").string(), malformed_);
+  const std::string odometry_csv = (dir / "odometry.csv").string();
+  odometry_ = read_odometry_csv(odometry_csv, malformed_);
   const std::string tum = (dir / "groundtruth.tum").string();
   if (fs::exists(tum)) ground_truth_ = read_tum(tum);
   const fs::path laser_yaml = dir / "laser.yaml", laser_csv = dir / "laser.csv";
   if (fs::exists(laser_yaml) || fs::exists(laser_csv)) {
     laser_ = read_laser(laser_yaml.string(), laser_csv.string(), malformed_);
+    laser_origin_ = laser_yaml.string();
   }
   if (malformed_.skipped() > 0)
     log.warn("image sequence ", folder, ": skipped ", malformed_.skipped(), " malformed record(s); the first: ",
              malformed_.first_problem());
-
-  for (Frame& frame : frames) {
-    if (covers(odometry_, frame.t)) frames_.push_back(std::move(frame));
-  }
-  if (frames_.empty()) {
-    throw std::runtime_error(frames_csv + ": no frame lies within the time span of odometry.csv");
-  }
-  if (frames_.size() < frames.size()) {
-    log.warn(frames.size() - frames_.size(), " frames of ", frames_csv,
-             " lie outside the odometry time span and are skipped");
-  }
+  select_frames(std::move(frames), frames_csv, odometry_csv, log);
   log.info("image sequence ", folder, ": ", frames_.size(), " frames ", camera_.width, "x",
            camera_.height, ", f = ", camera_.focal(), " px",
            ground_truth_.empty() ? ", no ground truth" : ", with ground truth", ", ",
            laser_.t.size(), " laser scans");
+}
+
+ImageSequence::ImageSequence(SequenceContents contents, const std::string& channel, Logger& log)
+    : channel_(channel),
+      camera_origin_(std::move(contents.camera_origin)),
+      camera_(contents.camera),
+      camera_row_(camera::reading_row(contents.camera)),
+      odometry_(std::move(contents.odometry)),
+      ground_truth_(std::move(contents.ground_truth)),
+      malformed_("error") {
+  if (odometry_.size() < 2)
+    throw std::runtime_error(contents.odometry_origin + ": " + std::to_string(odometry_.size()) +
+                             " odometry pose(s); at least two are needed to interpolate at the frames");
+  select_frames(std::move(contents.frames), contents.frames_origin, contents.odometry_origin, log);
+}
+
+void ImageSequence::select_frames(std::vector<Frame> frames, const std::string& frames_origin,
+                                  const std::string& odometry_origin, Logger& log) {
+  for (Frame& frame : frames) {
+    if (covers(odometry_, frame.t)) frames_.push_back(std::move(frame));
+  }
+  if (frames_.empty()) {
+    throw std::runtime_error(frames_origin + ": no frame lies within the time span of " + odometry_origin);
+  }
+  if (frames_.size() < frames.size()) {
+    log.warn(frames.size() - frames_.size(), " frames of ", frames_origin, " lie outside the time span of ",
+             odometry_origin, " and are skipped");
+  }
 }
 
 ImageSequence::ImageSequence(const PluginArgs& args)
@@ -346,8 +367,8 @@ Pose6 ImageSequence::initial_pose() const {
 }
 
 std::vector<RecordedMount> ImageSequence::recorded_mounts() const {
-  std::vector<RecordedMount> mounts{{channel_, camera_.mount, (fs::path(folder_) / "camera.yaml").string()}};
-  if (!laser_.t.empty()) mounts.push_back({laser_channel_, laser_.mount, (fs::path(folder_) / "laser.yaml").string()});
+  std::vector<RecordedMount> mounts{{channel_, camera_.mount, camera_origin_}};
+  if (!laser_.t.empty()) mounts.push_back({laser_channel_, laser_.mount, laser_origin_});
   return mounts;
 }
 

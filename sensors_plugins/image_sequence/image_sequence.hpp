@@ -45,6 +45,11 @@
 // The mounts of camera.yaml and laser.yaml are reported as recorded_mounts():
 // the run configuration's sensors.<name>.mount must repeat them, and the
 // kernel refuses a run where it does not.
+//
+// The same steps from data read elsewhere (the `rosbag` source compiles this
+// file in and builds a sequence from a bag's images and odometry): the
+// SequenceContents constructor. Its frames' image paths are where the image
+// will be when the step is delivered; this class does not open them.
 #pragma once
 
 #include <Eigen/Core>
@@ -108,6 +113,19 @@ planar_odometry::Increment increment_between(const Eigen::Vector3d& from,
 /// t must lie within [front().t, back().t].
 Eigen::Vector3d interpolate(const std::vector<StampedPose2>& poses, double t);
 
+/// A sequence read from somewhere other than a folder; the `origin` strings
+/// name where each part came from in messages (and the camera's as the
+/// recorded mount's origin).
+struct SequenceContents {
+  camera::CameraModel camera;
+  std::string camera_origin;
+  std::vector<Frame> frames;  ///< stamps increasing; `line` is the frame's index in its origin, for messages
+  std::string frames_origin;
+  std::vector<StampedPose2> odometry;  ///< stamps increasing
+  std::string odometry_origin;
+  std::vector<StampedPose6> ground_truth;  ///< may be empty
+};
+
 class ImageSequence final : public DataSource {
  public:
   static std::vector<ParamSpec> param_specs();
@@ -117,6 +135,9 @@ class ImageSequence final : public DataSource {
                 Logger& log = null_logger(), const std::string& laser_channel = "laser",
                 const std::string& on_malformed = "error");
   explicit ImageSequence(const PluginArgs& args);
+  /// The steps of `contents` (no laser); frames outside the odometry's time
+  /// span are left out as in a folder, with a warning.
+  ImageSequence(SequenceContents contents, const std::string& channel, Logger& log = null_logger());
 
   bool next(DataStep& step) override;
   std::size_t size_hint() const override { return frames_.size(); }
@@ -133,9 +154,12 @@ class ImageSequence final : public DataSource {
  private:
   /// Appends the not yet delivered scans stamped at or before t.
   void add_scans_until(double t, DataStep& step);
+  /// Keeps the frames within the odometry's time span (an error when none is).
+  void select_frames(std::vector<Frame> frames, const std::string& frames_origin,
+                     const std::string& odometry_origin, Logger& log);
 
-  std::string folder_;
   std::string channel_;
+  std::string camera_origin_;  ///< camera.yaml's path, or where the contents' camera came from
   camera::CameraModel camera_;
   Eigen::RowVectorXd camera_row_;
   std::vector<Frame> frames_;
@@ -143,6 +167,7 @@ class ImageSequence final : public DataSource {
   std::vector<StampedPose6> ground_truth_;
   std::string laser_channel_;
   LaserScans laser_;
+  std::string laser_origin_;  ///< laser.yaml's path
   records::MalformedRecords malformed_;
   std::size_t next_frame_ = 0;
   std::size_t next_scan_ = 0;

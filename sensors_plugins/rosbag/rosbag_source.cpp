@@ -7,8 +7,10 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "bag_camera.hpp"
 #include "bag_reader.hpp"
 #include "carmen_log.hpp"
+#include "image_sequence/image_sequence.hpp"
 
 namespace mspace::rosbag_source {
 namespace {
@@ -23,9 +25,19 @@ const std::set<std::string>& carmen_only() {
   return keys;
 }
 
+/// The keys a camera bag (image_topic set) reads. Every other key applies to
+/// scans only, and a camera bag refuses it at any value but its default
+/// rather than ignore it.
+const std::set<std::string>& camera_keys() {
+  static const std::set<std::string> keys{"file",       "image_topic", "camera_yaml", "camera_channel",
+                                          "odometry_topic", "odom_frame", "base_frame",  "ground_truth_topic"};
+  return keys;
+}
+
 BagRequest request_from(const Params& p) {
   BagRequest r;
   r.file = p.get_string("file");
+  r.image_topic = p.get_string("image_topic");
   r.scan_topic = p.get_string("scan_topic");
   r.odometry_topic = p.get_string("odometry_topic");
   r.odom_frame = p.get_string("odom_frame");
@@ -82,6 +94,14 @@ std::vector<ParamSpec> RosbagSource::param_specs() {
       param_string("ground_truth_topic", "",
                    "nav_msgs/Odometry or geometry_msgs/PoseStamped topic of true poses, interpolated at the scan "
                    "stamps (empty: no ground truth)"),
+      param_string("image_topic", "",
+                   "sensor_msgs/Image topic (mono8, mono16, bgr8 or rgb8): one step per image for the camera "
+                   "pipeline, time = the image's header stamp; empty: a laser bag (scan_topic)"),
+      param_string("camera_yaml", "",
+                   "with image_topic: the camera's intrinsics and mount, a camera.yaml as in an image_sequence "
+                   "folder (the mount is reported as the camera's recorded mount; /tf_static base_frame -> the "
+                   "images' frame_id, when recorded, must agree with it)"),
+      param_string("camera_channel", "camera", "with image_topic: channel of the image readings"),
       param_list("laser_mount", {},
                  "the laser's pose on the robot [x, y, theta_deg] for laser odometry; empty: /tf_static "
                  "base_frame -> the scans' frame_id when the bag has it (then reported as the recorded mount of "
@@ -94,10 +114,32 @@ std::vector<ParamSpec> RosbagSource::param_specs() {
 
 RosbagSource::RosbagSource(const PluginArgs& args) {
   const BagRequest request = request_from(args.params);
+  Logger& out = args.log();
+  if (!request.image_topic.empty()) {
+    const std::string camera_yaml = args.params.get_string("camera_yaml");
+    if (camera_yaml.empty())
+      throw std::runtime_error(request.file + ": image_topic " + request.image_topic +
+                               " needs camera_yaml (the camera's intrinsics and mount, as an image_sequence "
+                               "folder's camera.yaml)");
+    for (const ParamSpec& spec : param_specs()) {
+      const auto given = args.params.values().find(spec.name);
+      if (!camera_keys().count(spec.name) && given != args.params.values().end() &&
+          given->second != spec.default_value)
+        throw std::runtime_error(request.file + ": '" + spec.name + "' applies to scans; with image_topic " +
+                                 request.image_topic + " the steps are the images (camera keys: camera_yaml, "
+                                 "camera_channel)");
+    }
+    const BagContents bag = read_bag(request);
+    frame_files_ = std::make_unique<BagFrameFiles>(request.file, request.image_topic);
+    images_ = std::make_unique<image_sequence::ImageSequence>(
+        sequence_from_bag(bag, request, camera_yaml, *frame_files_), args.params.get_string("camera_channel"), out);
+    out.info("read ", bag.images.size(), " images on ", request.image_topic, " and ", bag.odometry.size(),
+             " odometry poses on ", request.odometry_topic, " from ", request.file, "; camera ", camera_yaml);
+    return;
+  }
   const BagContents bag = read_bag(request);
   std::size_t left_out = 0;
   carmen_log::LogContents log = to_log(bag, request, left_out);
-  Logger& out = args.log();
   out.info("read ", bag.scans.size(), " scans on ", request.scan_topic, " and ", bag.odometry.size(),
            " odometry poses on ", request.odometry_topic, " from ", request.file);
   if (left_out > 0)
@@ -112,13 +154,29 @@ RosbagSource::RosbagSource(const PluginArgs& args) {
   carmen.params.set("file", request.file);
   carmen.params.set("ground_truth", std::string(request.ground_truth_topic.empty() ? "none" : "log"));
   carmen.params.set("laser_offset", args.params.get_list("laser_mount"));
-  steps_ = std::make_unique<carmen_log::CarmenLogSource>(carmen, std::move(log));
+  scans_ = std::make_unique<carmen_log::CarmenLogSource>(carmen, std::move(log));
 }
 
 RosbagSource::~RosbagSource() = default;
-bool RosbagSource::next(DataStep& step) { return steps_->next(step); }
-std::size_t RosbagSource::size_hint() const { return steps_->size_hint(); }
-Pose6 RosbagSource::initial_pose() const { return steps_->initial_pose(); }
-std::vector<RecordedMount> RosbagSource::recorded_mounts() const { return steps_->recorded_mounts(); }
+
+DataSource& RosbagSource::steps() const {
+  if (images_) return *images_;
+  return *scans_;
+}
+
+bool RosbagSource::next(DataStep& step) {
+  if (!steps().next(step)) return false;
+  if (images_) {
+    // The sequence's frame (and so its message) of this step; its image file
+    // is written now, the step's reading already names it.
+    const image_sequence::Frame& frame = images_->frames().at(images_delivered_++);
+    frame_files_->write(static_cast<std::size_t>(frame.line));
+  }
+  return true;
+}
+
+std::size_t RosbagSource::size_hint() const { return steps().size_hint(); }
+Pose6 RosbagSource::initial_pose() const { return steps().initial_pose(); }
+std::vector<RecordedMount> RosbagSource::recorded_mounts() const { return steps().recorded_mounts(); }
 
 }  // namespace mspace::rosbag_source

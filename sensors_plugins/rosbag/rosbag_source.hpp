@@ -6,6 +6,11 @@
 // ((range, bearing) per beam, 0 = no return), the odometry increments, laser
 // odometry (`odometry: scan_matched`), ground truth and initial pose are
 // exactly those of a CARMEN log holding the same scans.
+//
+// With `image_topic` set the bag is a camera recording instead: one step per
+// sensor_msgs/Image, made by the `image_sequence` source's code (its sources
+// are compiled in too) with the camera of `camera_yaml`; see bag_camera.hpp
+// for how the images reach the extractors. Scans are not read then.
 #pragma once
 
 #include <memory>
@@ -17,8 +22,13 @@
 namespace mspace::carmen_log {
 class CarmenLogSource;
 }
+namespace mspace::image_sequence {
+class ImageSequence;
+}
 
 namespace mspace::rosbag_source {
+
+class BagFrameFiles;
 
 class RosbagSource final : public DataSource {
  public:
@@ -32,7 +42,13 @@ class RosbagSource final : public DataSource {
   std::vector<RecordedMount> recorded_mounts() const override;
 
  private:
-  std::unique_ptr<carmen_log::CarmenLogSource> steps_;
+  /// The scans' steps (laser bags) or …
+  std::unique_ptr<carmen_log::CarmenLogSource> scans_;
+  /// … the images' (camera bags, image_topic set), whose files `frame_files_` writes.
+  std::unique_ptr<image_sequence::ImageSequence> images_;
+  std::unique_ptr<BagFrameFiles> frame_files_;
+  std::size_t images_delivered_ = 0;
+  DataSource& steps() const;
 };
 
 }  // namespace mspace::rosbag_source

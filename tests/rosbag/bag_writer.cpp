@@ -4,11 +4,13 @@
 #include <geometry_msgs/PoseStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <rosbag/bag.h>
+#include <sensor_msgs/Image.h>
 #include <sensor_msgs/LaserScan.h>
 #include <tf2_msgs/TFMessage.h>
 
 #include <cmath>
 #include <limits>
+#include <map>
 
 namespace mspace::rosbag_test {
 namespace {
@@ -101,6 +103,72 @@ void write_stamped_scans(const std::filesystem::path& file, const std::vector<do
     odom.header.stamp = recorded;
     odom.pose.pose.orientation.w = 1.0;
     bag.write("/odom", recorded, odom);
+  }
+  bag.close();
+}
+
+}  // namespace mspace::rosbag_test
+
+namespace mspace::rosbag_test {
+
+void write_camera_bag(const CameraBag& contents, const std::filesystem::path& file) {
+  rosbag::Bag bag(file.string(), rosbag::bagmode::Write);
+  // Messages go in by (time, kind): a bag holds them in any order, but a
+  // recorder writes them as they arrive.
+  enum Kind { kOdometry, kTruth, kImage };
+  std::multimap<std::pair<double, int>, std::size_t> order;
+  for (std::size_t i = 0; i < contents.odometry.size(); ++i) order.emplace(std::pair{contents.odometry[i].t, kOdometry}, i);
+  for (std::size_t i = 0; i < contents.ground_truth.size(); ++i)
+    order.emplace(std::pair{contents.ground_truth[i].t, kTruth}, i);
+  for (std::size_t i = 0; i < contents.frames.size(); ++i) order.emplace(std::pair{contents.frames[i].t, kImage}, i);
+  const ros::Duration latency(1.0);
+  if (contents.mount) {
+    const ros::Time first(order.empty() ? 1.0 : order.begin()->first.first);
+    tf2_msgs::TFMessage tf;
+    geometry_msgs::TransformStamped mount;
+    mount.header.stamp = first;
+    mount.header.frame_id = "base_link";
+    mount.child_frame_id = contents.frame_id;
+    mount.transform.translation.x = contents.mount->first.x();
+    mount.transform.translation.y = contents.mount->first.y();
+    mount.transform.translation.z = contents.mount->first.z();
+    const std::array<double, 4>& q = contents.mount->second;
+    mount.transform.rotation.x = q[0];
+    mount.transform.rotation.y = q[1];
+    mount.transform.rotation.z = q[2];
+    mount.transform.rotation.w = q[3];
+    tf.transforms.push_back(mount);
+    bag.write("/tf_static", first + latency, tf);
+  }
+  for (const auto& [key, i] : order) {
+    const ros::Time t(key.first);
+    const ros::Time recorded = t + latency;
+    if (key.second == kOdometry) {
+      nav_msgs::Odometry odom;
+      odom.header.stamp = t;
+      odom.header.frame_id = "odom";
+      odom.child_frame_id = "base_link";
+      odom.pose.pose = pose(contents.odometry[i].pose);
+      bag.write("/odom", recorded, odom);
+    } else if (key.second == kTruth) {
+      geometry_msgs::PoseStamped truth;
+      truth.header.stamp = t;
+      truth.header.frame_id = "map";
+      truth.pose = pose(contents.ground_truth[i].pose);
+      bag.write("/ground_truth", recorded, truth);
+    } else {
+      const CameraFrame& f = contents.frames[i];
+      sensor_msgs::Image image;
+      image.header.stamp = t;
+      image.header.frame_id = contents.frame_id;
+      image.width = f.width;
+      image.height = f.height;
+      image.step = f.step;
+      image.encoding = f.encoding;
+      image.is_bigendian = f.big_endian ? 1 : 0;
+      image.data = f.data;
+      bag.write(contents.image_topic, recorded, image);
+    }
   }
   bag.close();
 }
