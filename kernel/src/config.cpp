@@ -126,8 +126,12 @@ struct Item {
 /// or one section and reports problems through fail().
 class Reader {
  public:
-  Reader(std::string file, PluginRegistry& registry, std::vector<std::string> overrides = {})
-      : file_(std::move(file)), registry_(registry), overrides_(std::move(overrides)) {}
+  Reader(std::string file, PluginRegistry& registry, std::vector<std::string> overrides = {},
+         bool map_from_command_line = false)
+      : file_(std::move(file)),
+        registry_(registry),
+        overrides_(std::move(overrides)),
+        map_from_command_line_(map_from_command_line) {}
 
   RunConfig read_document(const YAML::Node& root);
 
@@ -187,6 +191,7 @@ class Reader {
   std::string file_;
   PluginRegistry& registry_;
   std::vector<std::string> overrides_;  ///< "dotted.key=value", as given on the command line
+  bool map_from_command_line_ = false;  ///< --map / --mode follow: the map section is checked then
 };
 
 const std::string* Reader::override_of(const std::string& key) const {
@@ -460,12 +465,12 @@ MapConfig Reader::read_map(const Item* item) const {
     map.working_set_rows = static_cast<int>(integer(*f, 1, 1 << 20));
   if (const Item* f = find(fields, "extend_when_unmapped")) {
     map.extend_when_unmapped = number(*f, 0.0);
-    if (map.extend_when_unmapped > 0.0 && map.mode != MapConfig::Mode::Localize)
+    if (map.extend_when_unmapped > 0.0 && map.mode != MapConfig::Mode::Localize && !map_from_command_line_)
       fail(*f, "extend_when_unmapped switches a localize run to mapping; this run's map.mode is " +
                    std::string(map_mode_name(map.mode)));
   }
   std::string problem = map_config_problem(map);
-  if (!problem.empty()) fail(*item, problem);
+  if (!problem.empty() && !map_from_command_line_) fail(*item, problem);
   return map;
 }
 
@@ -623,7 +628,7 @@ RunConfig Reader::read_document(const YAML::Node& root) {
     // Without a map section the map may come from the command line (--map);
     // resolve_run_request checks then. A map section that says otherwise is wrong now.
     const std::string problem = map_config_problem(config.map);
-    if (!problem.empty() && find(sections, "map") != nullptr) fail(*initial_pose, problem);
+    if (!problem.empty() && find(sections, "map") != nullptr && !map_from_command_line_) fail(*initial_pose, problem);
   }
   return config;
 }
@@ -826,6 +831,9 @@ std::string map_config_problem(const MapConfig& map) {
     return "a mapping run starts from an empty map; to map on from '" + map.load +
            "' give mode: extend (or --mode extend), to localize in it mode: localize";
   if (map.start_at_map_end && map.load.empty()) return "start: map_end needs a map to load";
+  if (map.extend_when_unmapped > 0.0 && map.mode != MapConfig::Mode::Localize)
+    return std::string("extend_when_unmapped switches a localize run to mapping; this run's map.mode is ") +
+           map_mode_name(map.mode);
   if (map.search_pose && map.mode != MapConfig::Mode::Localize)
     return std::string("initial_pose: search finds the robot in a map it localizes in; this run's map.mode is ") +
            map_mode_name(map.mode) + " (give --map DIR, or map: {load: DIR, mode: localize})";
@@ -911,7 +919,7 @@ void apply_override(YAML::Node& root, const std::string& assignment) {
 }  // namespace
 
 RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry,
-                       const std::vector<std::string>& overrides) {
+                       const std::vector<std::string>& overrides, bool map_from_command_line) {
   YAML::Node root;
   try {
     root = YAML::Load(text);
@@ -920,11 +928,11 @@ RunConfig parse_config(const std::string& text, const std::string& file_name_for
                       std::to_string(e.mark.column + 1) + ": YAML syntax error: " + e.msg);
   }
   for (const std::string& o : overrides) apply_override(root, o);
-  return Reader(file_name_for_messages, registry, overrides).read_document(root);
+  return Reader(file_name_for_messages, registry, overrides, map_from_command_line).read_document(root);
 }
 
 RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry,
-                      const std::vector<std::string>& overrides) {
+                      const std::vector<std::string>& overrides, bool map_from_command_line) {
   std::error_code ec;
   const auto status = std::filesystem::status(file, ec);
   if (!std::filesystem::exists(status)) throw ConfigError(file.string() + ": no such file");
@@ -934,7 +942,7 @@ RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registr
   if (!in) throw ConfigError(file.string() + ": cannot read the configuration file (permissions?)");
   std::ostringstream text;
   text << in.rdbuf();
-  return parse_config(text.str(), file.string(), registry, overrides);
+  return parse_config(text.str(), file.string(), registry, overrides, map_from_command_line);
 }
 
 void override_estimator(RunConfig& config, const std::string& plugin, PluginRegistry& registry) {

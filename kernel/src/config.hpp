@@ -226,13 +226,17 @@ struct RunConfig {
 /// (VALUE is YAML: 5, true, [1, 2], text), applied over the file before it is
 /// read: any key, plugin parameters included, checked like the file's own
 /// values; a problem with one names its --set instead of a file position.
+/// `map_from_command_line`: the command line gives --map / --mode, applied
+/// after reading (resolve_run_request); the map section's consistency (a mode
+/// without a map to load, start: map_end, initial_pose: search) is then
+/// checked there, with the command line's values, instead of here.
 RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry,
-                      const std::vector<std::string>& overrides = {});
+                      const std::vector<std::string>& overrides = {}, bool map_from_command_line = false);
 
 /// Same, from text; `file_name_for_messages` prefixes every error message and
 /// its stem is the default run name.
 RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry,
-                       const std::vector<std::string>& overrides = {});
+                       const std::vector<std::string>& overrides = {}, bool map_from_command_line = false);
 
 /// The fully resolved configuration (every parameter with its effective value)
 /// as YAML text in the run-file layout; parse_config accepts it back.

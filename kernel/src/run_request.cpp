@@ -24,7 +24,8 @@ void apply_map_request(RunConfig& config, const RunRequest& r) {
     if (!known) throw ConfigError("--mode: '" + r.mode + "' is not one of: mapping, localize, extend");
   }
   const std::string problem = map_config_problem(config.map);
-  if (!problem.empty()) throw ConfigError("--map / --mode: " + problem);
+  if (!problem.empty())
+    throw ConfigError(config.file.string() + " with --map / --mode: map: " + problem);
 }
 
 /// --seed on a run none of whose plugins draws random numbers changes
@@ -44,9 +45,10 @@ void warn_if_nothing_seeded(const RunConfig& config) {
 }  // namespace
 
 RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
+  const bool map_given = !r.map.empty() || !r.mode.empty();  // apply_map_request checks the map section then
   RunConfig config = r.config_file.empty()
-                         ? parse_config(default_config_text(), default_config_name(), registry, r.sets)
-                         : load_config(r.config_file, registry, r.sets);
+                         ? parse_config(default_config_text(), default_config_name(), registry, r.sets, map_given)
+                         : load_config(r.config_file, registry, r.sets, map_given);
   for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
   set_log_level(parse_log_level(r.log_level.empty() ? config.log_level : r.log_level));
   if (!r.output_dir.empty()) config.output.dir = r.output_dir;

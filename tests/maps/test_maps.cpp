@@ -36,6 +36,7 @@
 #include "test_paths.hpp"
 #include "plugin_registry.hpp"
 #include "relations.hpp"
+#include "run_request.hpp"
 #include "runner.hpp"
 #include "slam.hpp"
 
@@ -578,6 +579,44 @@ TEST(Localize, IntelSecondHalfInTheMapOfTheFirst) {
   ASSERT_TRUE(report.has_value());
   EXPECT_EQ(report->added, 0);
   EXPECT_EQ(report->changed, 0);
+}
+
+// The map section's keys given with --set and the map itself with --map (the
+// way a user writes a session on the command line): checked after --map is
+// applied, not refused for lacking it; wrong combinations still refused,
+// naming the file and the command line.
+TEST(MapCommandLine, CompletesTheMapSection) {
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunRequest r;
+  r.config_file = config_file("sim_points.yaml").string();
+  r.sets = {"map.start=map_end", "map.extend_when_unmapped=2"};
+  r.map = "out/some_map";
+  const RunConfig c = resolve_run_request(r, registry);
+  EXPECT_EQ(c.map.mode, MapConfig::Mode::Localize);  // --map alone: localize
+  EXPECT_TRUE(c.map.start_at_map_end);
+  EXPECT_EQ(c.map.load, "out/some_map");
+  r.sets = {"initial_pose=search"};
+  EXPECT_TRUE(resolve_run_request(r, registry).map.search_pose);
+  r.mode = "extend";
+  try {
+    resolve_run_request(r, registry);
+    ADD_FAILURE() << "initial_pose: search in an extend run was accepted";
+  } catch (const ConfigError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("sim_points.yaml with --map / --mode"), std::string::npos) << what;
+    EXPECT_NE(what.find("map.mode is extend"), std::string::npos) << what;
+  }
+  // Without --map the file's own section is checked at its line, as before.
+  r.map.clear();
+  r.mode.clear();
+  r.sets = {"map.start=map_end"};
+  try {
+    resolve_run_request(r, registry);
+    ADD_FAILURE() << "start: map_end without a map was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("needs a map to load"), std::string::npos) << e.what();
+  }
 }
 
 // ---------------------------------------------------------------- the kidnapped robot
