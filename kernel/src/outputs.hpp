@@ -24,7 +24,8 @@ struct RunSummary {
   std::string config_file;
   long long steps = 0;
   double data_seconds = 0.0;  ///< time span covered by the data
-  double wall_seconds = 0.0;  ///< elapsed (real) time of the whole run
+  double wall_seconds = 0.0;  ///< elapsed (real) time of the whole run, from its first step
+  double source_load_seconds = 0.0;  ///< before the first step: Slam::source_load_seconds()
   int state_dimension = 0;
   /// feature-type instance → M-space dimension → count
   std::map<std::string, std::map<int, int>> features_by_dim;
