@@ -2,16 +2,17 @@
 // map's features shaded by M-space dimension (with 3σ ellipses of their point
 // blocks), the estimated and the true trajectory, a scale bar and a legend.
 // Generic: a feature is drawn as it asks (Feature::drawing: polygons,
-// segments, labelled points in map coordinates) or, by default, from its
-// coordinate blocks only (a point block as a dot, several point blocks as a
-// polyline through them). When features
-// have 3-D points off the ground plane (ceiling lines, lamps) a side view
+// segments, labelled points in map coordinates, or directions known without
+// a position) or, by default, from its coordinate blocks only (a point block
+// as a dot, several point blocks as a polyline through them). When features
+// have 3-D points off the ground plane (e.g. on a ceiling) a side view
 // (x against height) is added under the top view, and single such points are
 // drawn as squares. The occupancy grid's picture (grid.png) draws the same
 // features over the grid.
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 
 #include <Eigen/Eigenvalues>
@@ -46,7 +47,7 @@ std::vector<Eigen::Vector3d> point3d_blocks(const Feature& f) {
   return pts;
 }
 
-/// Features with 3-D points off the ground plane (ceiling lines, lamps) get a
+/// Features with 3-D points off the ground plane (e.g. on a ceiling) get a
 /// side view; a single such point is drawn as a square.
 constexpr double kOffGround = 0.05;  // m
 
@@ -75,6 +76,52 @@ cv::Scalar dim_colour(int dim, int max_dim) {
   return {static_cast<double>(230 - 150 * f), static_cast<double>(160 - 140 * f), static_cast<double>(120 - 100 * f)};
 }
 
+/// Whether the feature has a position to draw: not when all it asks to be
+/// drawn as is directions (FeatureDrawing::direction_only), e.g. a line
+/// whose M-space holds its direction only; its coordinates are then a guess.
+bool placed(const Feature& f) {
+  const std::optional<FeatureDrawing> drawing = f.drawing();
+  return !(drawing && drawing->direction_only());
+}
+
+/// Where a direction-only feature's glyphs are shown (the first column of
+/// each pair of its Direction items).
+std::vector<Eigen::Vector2d> direction_places(const Feature& f) {
+  std::vector<Eigen::Vector2d> places;
+  if (const std::optional<FeatureDrawing> drawing = f.drawing())
+    for (const DrawingItem& item : drawing->items)
+      if (item.kind == DrawingItem::Kind::Direction)
+        for (Eigen::Index i = 0; i + 1 < item.points.cols(); i += 2) places.emplace_back(item.points.col(i));
+  return places;
+}
+
+/// The glyph of a direction known without a position: a dashed double-headed
+/// arrow of fixed length in pixels (not to scale: it spans no known extent)
+/// through a small ring at the place it is shown at (where it was seen from).
+/// Dashed and thin, unlike every placed item (solid, 2 px).
+void draw_direction_glyph(cv::Mat& img, const cv::Point& at, const Eigen::Vector2d& direction,
+                          const cv::Scalar& colour) {
+  constexpr double kRing = 3.0, kHalf = 16.0, kDash = 4.0, kGap = 4.0, kHead = 5.0;  // px
+  const double norm = direction.norm();
+  if (!(norm > 0.0)) return;
+  const cv::Point2d d(direction.x() / norm, -direction.y() / norm);  // image rows grow downwards
+  const cv::Point2d c(at.x, at.y);
+  auto pt = [](const cv::Point2d& p) {
+    return cv::Point(static_cast<int>(std::lround(p.x)), static_cast<int>(std::lround(p.y)));
+  };
+  // Dashes and heads the same on both sides of the ring (-d draws the same
+  // glyph): an open head at each end, the line's sense is not known either.
+  for (const double sign : {-1.0, 1.0}) {
+    for (double s = kRing + 1.0; s < kHalf; s += kDash + kGap)
+      cv::line(img, pt(c + d * (sign * s)), pt(c + d * (sign * std::min(s + kDash, kHalf))), colour, 1, cv::LINE_AA);
+    const cv::Point2d tip = c + d * (sign * kHalf);
+    const cv::Point2d back = d * (-sign * kHead), side(-d.y * kHead * 0.6, d.x * kHead * 0.6);
+    cv::line(img, pt(tip), pt(tip + back + side), colour, 1, cv::LINE_AA);
+    cv::line(img, pt(tip), pt(tip + back - side), colour, 1, cv::LINE_AA);
+  }
+  cv::circle(img, at, static_cast<int>(kRing), colour, 1, cv::LINE_AA);
+}
+
 void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const Eigen::Matrix2d& cov,
                   const cv::Scalar& colour) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
@@ -89,15 +136,16 @@ void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const E
 
 /// The map's features over a top view: as their drawing() asks, or point
 /// blocks as dots (to scale when the feature has a footprint), several point
-/// blocks as a polyline, shaded
-/// by M-space dimension, with 3σ ellipses; shared coordinates as squares.
+/// blocks as a polyline, shaded by M-space dimension, with 3σ ellipses of
+/// placed features; shared coordinates as squares.
 void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
   for (const MapFeature& f : slam.features()) {
     const int dim = f.feature->mspace_dim();
     const int max_dim = slam.feature_types()[f.type].type->max_mspace_dim();
     const cv::Scalar colour = dim_colour(dim, max_dim);
     const std::vector<Eigen::Vector2d> pts = point_blocks(*f.feature);
-    if (const std::optional<FeatureDrawing> drawing = f.feature->drawing()) {
+    const std::optional<FeatureDrawing> drawing = f.feature->drawing();
+    if (drawing) {
       draw_feature_drawing(img, v, *drawing, colour);
     } else if (pts.size() >= 2) {
       for (std::size_t i = 0; i + 1 < pts.size(); ++i)
@@ -113,7 +161,8 @@ void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
       else
         cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
     }
-    if (dim == 0) continue;
+    // No ellipses where no position is known: they would sit at guessed points.
+    if (dim == 0 || (drawing && drawing->direction_only())) continue;
     // Covariance of x_f implied by the M-space covariance: B̃ P B̃ᵀ (eq. 11).
     const Eigen::MatrixXd Bd = f.feature->B_dual();
     const Eigen::MatrixXd C = Bd * slam.feature_covariance(f) * Bd.transpose();
@@ -166,6 +215,9 @@ void draw_feature_drawing(cv::Mat& img, const View& v, const FeatureDrawing& dra
       case DrawingItem::Kind::Points:
         for (Eigen::Index i = 0; i < n; ++i) cv::circle(img, at(i), 3, colour, cv::FILLED, cv::LINE_AA);
         break;
+      case DrawingItem::Kind::Direction:  // (place, direction) pairs
+        for (Eigen::Index i = 0; i + 1 < n; i += 2) draw_direction_glyph(img, at(i), item.points.col(i + 1), colour);
+        break;
     }
     if (!item.label.empty())
       cv::putText(img, item.label, at(0) + cv::Point(5, -5), cv::FONT_HERSHEY_SIMPLEX, 0.4, colour, 1, cv::LINE_AA);
@@ -180,9 +232,11 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   };
   for (const StampedPose& p : slam.trajectory()) grow(p.pose[kX], p.pose[kY]);
   for (const StampedPose& p : slam.ground_truth()) grow(p.pose[kX], p.pose[kY]);
-  for (const MapFeature& f : slam.features())
-    if (f.feature->mspace_dim() > 0)
-      for (const Eigen::Vector2d& p : point_blocks(*f.feature)) grow(p.x(), p.y());
+  for (const MapFeature& f : slam.features()) {
+    if (f.feature->mspace_dim() == 0) continue;
+    for (const Eigen::Vector2d& p : placed(*f.feature) ? point_blocks(*f.feature) : direction_places(*f.feature))
+      grow(p.x(), p.y());
+  }
   const Eigen::MatrixXd truth = slam.true_landmarks();
   for (Eigen::Index i = 0; i < truth.cols(); ++i) grow(truth(0, i), truth(1, i));
   if (lo_x > hi_x) lo_x = lo_y = -1, hi_x = hi_y = 1;
@@ -193,11 +247,11 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   v.scale = (size_px - 2.0 * v.margin) / span;
   v.min_x = lo_x - 0.5 * (span - (hi_x - lo_x));
   v.min_y = lo_y - 0.5 * (span - (hi_y - lo_y));
-  // Heights of the features off the ground plane, for the side view.
+  // Heights of the placed features off the ground plane, for the side view.
   double lo_z = 0.0, hi_z = 0.0;
   bool side = false;
   for (const MapFeature& f : slam.features()) {
-    if (f.feature->mspace_dim() == 0 || !off_ground(*f.feature)) continue;
+    if (f.feature->mspace_dim() == 0 || !off_ground(*f.feature) || !placed(*f.feature)) continue;
     side = true;
     for (const Eigen::Vector3d& p : point3d_blocks(*f.feature)) lo_z = std::min(lo_z, p.z()), hi_z = std::max(hi_z, p.z());
   }
@@ -257,7 +311,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     for (const StampedPose& p : slam.trajectory()) img.at<cv::Vec3b>(sv.px(p.pose[kX], 0)) = {200, 80, 30};
     for (const MapFeature& f : slam.features()) {
       const int dim = f.feature->mspace_dim();
-      if (dim == 0 || !off_ground(*f.feature)) continue;
+      if (dim == 0 || !off_ground(*f.feature) || !placed(*f.feature)) continue;
       const cv::Scalar colour = dim_colour(dim, slam.feature_types()[f.type].type->max_mspace_dim());
       const std::vector<Eigen::Vector3d> pts = point3d_blocks(*f.feature);
       for (std::size_t i = 0; i + 1 < pts.size(); ++i)
@@ -294,6 +348,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
   legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
   // One line per feature type: how many, and at which M-space dimensions.
+  bool any_direction_only = false;
   for (std::size_t t = 0; t < slam.feature_types().size(); ++t) {
     int count = 0, lowest = 1 << 30, highest = -1;
     for (const MapFeature& f : slam.features()) {
@@ -301,6 +356,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
       ++count;
       lowest = std::min(lowest, f.feature->mspace_dim());
       highest = std::max(highest, f.feature->mspace_dim());
+      any_direction_only = any_direction_only || !placed(*f.feature);
     }
     if (count == 0) continue;
     const FeatureTypeSlot& slot = slam.feature_types()[t];
@@ -308,6 +364,12 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     text << "  " << slot.instance << " (" << slot.plugin << "): " << count << ", M-space dim " << lowest;
     if (highest > lowest) text << "-" << highest;
     legend(text.str(), dim_colour(highest, highest));
+  }
+  if (any_direction_only) {
+    draw_direction_glyph(img, {19, row - 4}, {1.0, 0.0}, {0, 0, 0});
+    cv::putText(img, "direction only, position unknown: shown where last seen from, not to scale", {36, row},
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
+    row += 18;
   }
   if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
   cv::putText(img, slam.config().name, {size_px - 220, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
