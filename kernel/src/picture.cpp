@@ -8,11 +8,15 @@
 // have 3-D points off the ground plane (e.g. on a ceiling) a side view
 // (x against height) is added under the top view, and single such points are
 // drawn as squares. The occupancy grid's picture (grid.png) draws the same
-// features over the grid.
+// features over the grid. MapFrames draws the top view every N steps of a
+// run in one fixed view, with the loop closures so far.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <optional>
+#include <sstream>
 #include <stdexcept>
 
 #include <Eigen/Eigenvalues>
@@ -183,6 +187,182 @@ void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
   }
 }
 
+/// An axis-aligned extent in the map (metres).
+struct Box {
+  double lo_x = 1e300, lo_y = 1e300, hi_x = -1e300, hi_y = -1e300;
+  bool empty() const { return lo_x > hi_x; }
+  void grow(double x, double y) {
+    lo_x = std::min(lo_x, x), lo_y = std::min(lo_y, y), hi_x = std::max(hi_x, x), hi_y = std::max(hi_y, y);
+  }
+  void grow(const Box& b) {
+    if (!b.empty()) grow(b.lo_x, b.lo_y), grow(b.hi_x, b.hi_y);
+  }
+  bool contains(const Box& b) const {
+    return b.empty() || (b.lo_x >= lo_x && b.lo_y >= lo_y && b.hi_x <= hi_x && b.hi_y <= hi_y);
+  }
+  /// The same, `margin` metres wider on every side.
+  Box padded(double margin) const { return {lo_x - margin, lo_y - margin, hi_x + margin, hi_y + margin}; }
+  double span() const { return std::max(hi_x - lo_x, hi_y - lo_y); }
+};
+
+/// Everything a top view draws: the paths, the placed features in the
+/// map, where direction-only ones are shown, the true landmarks.
+Box content_box(const Slam& slam) {
+  Box box;
+  for (const StampedPose& p : slam.trajectory()) box.grow(p.pose[kX], p.pose[kY]);
+  for (const StampedPose& p : slam.ground_truth()) box.grow(p.pose[kX], p.pose[kY]);
+  for (const MapFeature& f : slam.features()) {
+    if (f.feature->mspace_dim() == 0) continue;
+    for (const Eigen::Vector2d& p : placed(*f.feature) ? point_blocks(*f.feature) : direction_places(*f.feature))
+      box.grow(p.x(), p.y());
+  }
+  const Eigen::MatrixXd truth = slam.true_landmarks();
+  for (Eigen::Index i = 0; i < truth.cols(); ++i) box.grow(truth(0, i), truth(1, i));
+  return box;
+}
+
+/// The square view of size_px pixels centred on `box` (at least 1 m across).
+View square_view(Box box, int size_px) {
+  if (box.empty()) box = {-1, -1, 1, 1};
+  View v;
+  v.size = size_px;
+  const double span = std::max(box.span(), 1.0);
+  v.scale = (size_px - 2.0 * v.margin) / span;
+  v.min_x = box.lo_x - 0.5 * (span - (box.hi_x - box.lo_x));
+  v.min_y = box.lo_y - 0.5 * (span - (box.hi_y - box.lo_y));
+  return v;
+}
+
+/// The metres a square view spans inside its margins.
+double view_span(const View& v) { return (v.size - 2.0 * v.margin) / v.scale; }
+
+/// What a frame adds to the top view.
+struct FrameMarks {
+  std::int64_t step = 0;
+  const std::vector<std::size_t>* closures = nullptr;  ///< trajectory indices of the loop closures so far
+};
+
+/// The top view in the square of `v` (rows 0 … v.size of img): grid, true
+/// landmarks, paths, features, a frame's loop closures, scale bar, legend
+/// and title.
+void draw_top_view(cv::Mat& img, const View& v, const Slam& slam, const FrameMarks* frame) {
+  const double span = view_span(v);
+  // Grid every 10 m (or 1 m for small worlds).
+  const double grid = span > 30 ? 10.0 : 1.0;
+  for (double gx = std::floor(v.min_x / grid) * grid; gx <= v.min_x + span; gx += grid)
+    cv::line(img, v.px(gx, v.min_y), v.px(gx, v.min_y + span), {235, 235, 235}, 1);
+  for (double gy = std::floor(v.min_y / grid) * grid; gy <= v.min_y + span; gy += grid)
+    cv::line(img, v.px(v.min_x, gy), v.px(v.min_x + span, gy), {235, 235, 235}, 1);
+
+  const Eigen::MatrixXd truth = slam.true_landmarks();
+  for (Eigen::Index i = 0; i < truth.cols(); ++i)
+    cv::drawMarker(img, v.px(truth(0, i), truth(1, i)), {120, 120, 120}, cv::MARKER_CROSS, 9, 1, cv::LINE_AA);
+
+  // A path, broken where consecutive poses are much farther apart in time
+  // than usual (more than 1 s and 5 times the median interval): gaps in a
+  // reference such as GPS are not joined by straight lines, while a log with
+  // one pose every few seconds is still drawn as a path.
+  auto polyline = [&](const std::vector<StampedPose>& poses, const cv::Scalar& colour, int width) {
+    std::vector<double> dts;
+    for (std::size_t i = 1; i < poses.size(); ++i) dts.push_back(poses[i].t - poses[i - 1].t);
+    double gap = 1.0;
+    if (!dts.empty()) {
+      std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
+      gap = std::max(gap, 5.0 * dts[dts.size() / 2]);
+    }
+    std::vector<cv::Point> pts;
+    for (std::size_t i = 0; i <= poses.size(); ++i) {
+      if (i == poses.size() || (i > 0 && poses[i].t - poses[i - 1].t > gap)) {
+        if (pts.size() > 1) cv::polylines(img, pts, false, colour, width, cv::LINE_AA);
+        pts.clear();
+      }
+      if (i < poses.size()) pts.push_back(v.px(poses[i].pose[kX], poses[i].pose[kY]));
+    }
+  };
+  // Position-only references (e.g. GPS fixes) as dots, full poses as a path.
+  const auto& truth_poses = slam.ground_truth();
+  const bool positions_only =
+      !truth_poses.empty() && (truth_poses.front().known & (1u << kTheta)) == 0;
+  if (positions_only)
+    for (const StampedPose& p : truth_poses) cv::circle(img, v.px(p.pose[kX], p.pose[kY]), 1, {60, 170, 60}, cv::FILLED);
+  else
+    polyline(truth_poses, {60, 170, 60}, 2);
+  polyline(slam.trajectory(), {200, 80, 30}, 1);
+
+  draw_features(img, v, slam);
+
+  // A frame's loop closures: a ring where the robot was when each closed,
+  // at that pose's current estimate.
+  const cv::Scalar closure_colour(220, 0, 220);  // magenta: unlike the paths, features and shared coordinates
+  int closures = 0;
+  if (frame != nullptr && frame->closures != nullptr)
+    for (const std::size_t i : *frame->closures) {
+      if (i >= slam.trajectory().size()) continue;
+      const Pose6& p = slam.trajectory()[i].pose;
+      cv::circle(img, v.px(p[kX], p[kY]), 10, closure_colour, 3, cv::LINE_AA);
+      ++closures;
+    }
+
+  // Scale bar and legend.
+  const double bar = grid;
+  const cv::Point bar0(v.margin, v.size - v.margin / 2);  // under the top view
+  cv::line(img, bar0, bar0 + cv::Point(static_cast<int>(bar * v.scale), 0), {0, 0, 0}, 2);
+  cv::putText(img, std::to_string(static_cast<int>(bar)) + " m", bar0 + cv::Point(5, -6), cv::FONT_HERSHEY_SIMPLEX,
+              0.45, {0, 0, 0}, 1, cv::LINE_AA);
+  int row = 20;
+  auto legend_text = [&](const std::string& text) {
+    cv::putText(img, text, {36, row}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
+    row += 18;
+  };
+  auto legend = [&](const std::string& text, const cv::Scalar& colour) {
+    cv::line(img, {10, row - 4}, {30, row - 4}, colour, 3);
+    legend_text(text);
+  };
+  legend("estimated trajectory", {200, 80, 30});
+  if (!slam.ground_truth().empty()) {
+    // A reference that is not the truth (evaluation.reference) is named as what it is.
+    const std::string& reference = slam.config().evaluation.reference;
+    std::string label = positions_only ? "reference positions (dots)" : "true trajectory";
+    if (!reference.empty()) label = "reference: " + reference + (positions_only ? " (dots)" : "");
+    legend(label, {60, 170, 60});
+  }
+  if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
+  legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
+  // One line per feature type: how many, and at which M-space dimensions.
+  bool any_direction_only = false;
+  for (std::size_t t = 0; t < slam.feature_types().size(); ++t) {
+    int count = 0, lowest = 1 << 30, highest = -1;
+    for (const MapFeature& f : slam.features()) {
+      if (f.type != static_cast<int>(t) || f.feature->mspace_dim() == 0) continue;
+      ++count;
+      lowest = std::min(lowest, f.feature->mspace_dim());
+      highest = std::max(highest, f.feature->mspace_dim());
+      any_direction_only = any_direction_only || !placed(*f.feature);
+    }
+    if (count == 0) continue;
+    const FeatureTypeSlot& slot = slam.feature_types()[t];
+    std::ostringstream text;  // (not string + string: GCC 12 warns falsely on that here)
+    text << "  " << slot.instance << " (" << slot.plugin << "): " << count << ", M-space dim " << lowest;
+    if (highest > lowest) text << "-" << highest;
+    legend(text.str(), dim_colour(highest, highest));
+  }
+  if (any_direction_only) {
+    draw_direction_glyph(img, {19, row - 4}, {1.0, 0.0}, {0, 0, 0});
+    legend_text("direction only, position unknown: shown where last seen from, not to scale");
+  }
+  if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
+  if (closures > 0) {
+    cv::circle(img, {20, row - 4}, 6, closure_colour, 3, cv::LINE_AA);
+    legend_text("loop closed here (" + std::to_string(closures) + ")");
+  }
+  std::string title = slam.config().name;
+  if (frame != nullptr) title += ", step " + std::to_string(frame->step);
+  int baseline = 0;
+  const int title_width = cv::getTextSize(title, cv::FONT_HERSHEY_SIMPLEX, 0.5, 1, &baseline).width;
+  cv::putText(img, title, {std::min(v.size - 220, v.size - 10 - title_width), 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5,
+              {0, 0, 0}, 1, cv::LINE_AA);
+}
+
 /// Writes img (BGR) as a PNG.
 void encode_png(const std::filesystem::path& file, const cv::Mat& img) {
   if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
@@ -225,28 +405,8 @@ void draw_feature_drawing(cv::Mat& img, const View& v, const FeatureDrawing& dra
 }
 
 void write_picture(const std::filesystem::path& file, const Slam& slam, int size_px) {
-  // Bounds over everything drawn.
-  double lo_x = 1e300, lo_y = 1e300, hi_x = -1e300, hi_y = -1e300;
-  auto grow = [&](double x, double y) {
-    lo_x = std::min(lo_x, x), lo_y = std::min(lo_y, y), hi_x = std::max(hi_x, x), hi_y = std::max(hi_y, y);
-  };
-  for (const StampedPose& p : slam.trajectory()) grow(p.pose[kX], p.pose[kY]);
-  for (const StampedPose& p : slam.ground_truth()) grow(p.pose[kX], p.pose[kY]);
-  for (const MapFeature& f : slam.features()) {
-    if (f.feature->mspace_dim() == 0) continue;
-    for (const Eigen::Vector2d& p : placed(*f.feature) ? point_blocks(*f.feature) : direction_places(*f.feature))
-      grow(p.x(), p.y());
-  }
-  const Eigen::MatrixXd truth = slam.true_landmarks();
-  for (Eigen::Index i = 0; i < truth.cols(); ++i) grow(truth(0, i), truth(1, i));
-  if (lo_x > hi_x) lo_x = lo_y = -1, hi_x = hi_y = 1;
-
-  View v;
-  v.size = size_px;
-  const double span = std::max({hi_x - lo_x, hi_y - lo_y, 1.0});
-  v.scale = (size_px - 2.0 * v.margin) / span;
-  v.min_x = lo_x - 0.5 * (span - (hi_x - lo_x));
-  v.min_y = lo_y - 0.5 * (span - (hi_y - lo_y));
+  const View v = square_view(content_box(slam), size_px);
+  const double span = view_span(v);
   // Heights of the placed features off the ground plane, for the side view.
   double lo_z = 0.0, hi_z = 0.0;
   bool side = false;
@@ -259,48 +419,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   cv::Mat img(size_px + side_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
   SideView sv{&v, lo_z, size_px + side_px - v.margin};
 
-  // Grid every 10 m (or 1 m for small worlds).
-  const double grid = span > 30 ? 10.0 : 1.0;
-  for (double gx = std::floor(v.min_x / grid) * grid; gx <= v.min_x + span; gx += grid)
-    cv::line(img, v.px(gx, v.min_y), v.px(gx, v.min_y + span), {235, 235, 235}, 1);
-  for (double gy = std::floor(v.min_y / grid) * grid; gy <= v.min_y + span; gy += grid)
-    cv::line(img, v.px(v.min_x, gy), v.px(v.min_x + span, gy), {235, 235, 235}, 1);
-
-  for (Eigen::Index i = 0; i < truth.cols(); ++i)
-    cv::drawMarker(img, v.px(truth(0, i), truth(1, i)), {120, 120, 120}, cv::MARKER_CROSS, 9, 1, cv::LINE_AA);
-
-  // A path, broken where consecutive poses are much farther apart in time
-  // than usual (more than 1 s and 5 times the median interval): gaps in a
-  // reference such as GPS are not joined by straight lines, while a log with
-  // one pose every few seconds is still drawn as a path.
-  auto polyline = [&](const std::vector<StampedPose>& poses, const cv::Scalar& colour, int width) {
-    std::vector<double> dts;
-    for (std::size_t i = 1; i < poses.size(); ++i) dts.push_back(poses[i].t - poses[i - 1].t);
-    double gap = 1.0;
-    if (!dts.empty()) {
-      std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
-      gap = std::max(gap, 5.0 * dts[dts.size() / 2]);
-    }
-    std::vector<cv::Point> pts;
-    for (std::size_t i = 0; i <= poses.size(); ++i) {
-      if (i == poses.size() || (i > 0 && poses[i].t - poses[i - 1].t > gap)) {
-        if (pts.size() > 1) cv::polylines(img, pts, false, colour, width, cv::LINE_AA);
-        pts.clear();
-      }
-      if (i < poses.size()) pts.push_back(v.px(poses[i].pose[kX], poses[i].pose[kY]));
-    }
-  };
-  // Position-only references (e.g. GPS fixes) as dots, full poses as a path.
-  const auto& truth_poses = slam.ground_truth();
-  const bool positions_only =
-      !truth_poses.empty() && (truth_poses.front().known & (1u << kTheta)) == 0;
-  if (positions_only)
-    for (const StampedPose& p : truth_poses) cv::circle(img, v.px(p.pose[kX], p.pose[kY]), 1, {60, 170, 60}, cv::FILLED);
-  else
-    polyline(truth_poses, {60, 170, 60}, 2);
-  polyline(slam.trajectory(), {200, 80, 30}, 1);
-
-  draw_features(img, v, slam);
+  draw_top_view(img, v, slam, nullptr);
 
   if (side) {
     // Side view: x against height, the ground (z = 0) and the path on it.
@@ -324,56 +443,6 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     cv::putText(img, "side view: x (m) against height z (m), grid every 1 m", {10, size_px + 18},
                 cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
   }
-
-  // Scale bar and legend.
-  const double bar = grid;
-  const cv::Point bar0(v.margin, size_px - v.margin / 2);  // under the top view
-  cv::line(img, bar0, bar0 + cv::Point(static_cast<int>(bar * v.scale), 0), {0, 0, 0}, 2);
-  cv::putText(img, std::to_string(static_cast<int>(bar)) + " m", bar0 + cv::Point(5, -6), cv::FONT_HERSHEY_SIMPLEX,
-              0.45, {0, 0, 0}, 1, cv::LINE_AA);
-  int row = 20;
-  auto legend = [&](const std::string& text, const cv::Scalar& colour) {
-    cv::line(img, {10, row - 4}, {30, row - 4}, colour, 3);
-    cv::putText(img, text, {36, row}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
-    row += 18;
-  };
-  legend("estimated trajectory", {200, 80, 30});
-  if (!slam.ground_truth().empty()) {
-    // A reference that is not the truth (evaluation.reference) is named as what it is.
-    const std::string& reference = slam.config().evaluation.reference;
-    std::string label = positions_only ? "reference positions (dots)" : "true trajectory";
-    if (!reference.empty()) label = "reference: " + reference + (positions_only ? " (dots)" : "");
-    legend(label, {60, 170, 60});
-  }
-  if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
-  legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
-  // One line per feature type: how many, and at which M-space dimensions.
-  bool any_direction_only = false;
-  for (std::size_t t = 0; t < slam.feature_types().size(); ++t) {
-    int count = 0, lowest = 1 << 30, highest = -1;
-    for (const MapFeature& f : slam.features()) {
-      if (f.type != static_cast<int>(t) || f.feature->mspace_dim() == 0) continue;
-      ++count;
-      lowest = std::min(lowest, f.feature->mspace_dim());
-      highest = std::max(highest, f.feature->mspace_dim());
-      any_direction_only = any_direction_only || !placed(*f.feature);
-    }
-    if (count == 0) continue;
-    const FeatureTypeSlot& slot = slam.feature_types()[t];
-    std::ostringstream text;  // (not string + string: GCC 12 warns falsely on that here)
-    text << "  " << slot.instance << " (" << slot.plugin << "): " << count << ", M-space dim " << lowest;
-    if (highest > lowest) text << "-" << highest;
-    legend(text.str(), dim_colour(highest, highest));
-  }
-  if (any_direction_only) {
-    draw_direction_glyph(img, {19, row - 4}, {1.0, 0.0}, {0, 0, 0});
-    cv::putText(img, "direction only, position unknown: shown where last seen from, not to scale", {36, row},
-                cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
-    row += 18;
-  }
-  if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
-  cv::putText(img, slam.config().name, {size_px - 220, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
-
   encode_png(file, img);
 }
 
@@ -410,5 +479,96 @@ void write_grid_picture(const std::filesystem::path& file, const Slam& slam, con
               {10, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 200}, 1, cv::LINE_AA);
   encode_png(file, img);
 }
+
+// ---- Frames ---------------------------------------------------------------------
+
+struct MapFrames::Impl {
+  FramesReport report;
+  int size_px = 1000;
+  std::optional<Box> view;  ///< the view's extent (m), fixed once the first frame is drawn
+  std::int64_t last_step = -1;
+  std::int64_t closures_seen = 0;
+  std::vector<std::size_t> closures;  ///< trajectory index of each loop closure
+
+  /// The frame's file: the step zero-padded to 6 digits, so that the names
+  /// sort by step (a glob in ffmpeg or ImageMagick takes them in order).
+  static std::string file_name(std::int64_t step) {
+    char name[40];
+    std::snprintf(name, sizeof name, "frame_%06lld.png", static_cast<long long>(step));
+    return name;
+  }
+
+  /// The view for what there is to draw now: the first call sets it, later
+  /// ones only widen it when something drawn would fall outside.
+  void fit(const Slam& slam) {
+    const Box content = content_box(slam);
+    if (!view) {
+      // The world's extent when the source knows it (true landmarks): the
+      // view is then final from the first frame unless the paths leave it.
+      const bool world_known = slam.true_landmarks().cols() > 0;
+      const double margin = (world_known ? 0.1 : 0.25) * std::max(content.empty() ? 0.0 : content.span(), 1.0);
+      Box box = content.empty() ? Box{-1, -1, 1, 1} : content.padded(margin);
+      if (!world_known && box.span() < 10.0) box = box.padded(0.5 * (10.0 - box.span()));
+      view = box;
+    } else if (!view->contains(content)) {
+      Box box = *view;
+      box.grow(content);
+      view = box.padded(0.25 * box.span());
+      ++report.view_changes;
+    }
+  }
+
+  void write(const Slam& slam) {
+    const auto t0 = std::chrono::steady_clock::now();
+    fit(slam);
+    cv::Mat img(size_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+    const FrameMarks marks{slam.steps_done(), &closures};
+    draw_top_view(img, square_view(*view, size_px), slam, &marks);
+    const std::string name = file_name(slam.steps_done());
+    write_atomically(report.folder / name, [&](const std::filesystem::path& f) { encode_png(f, img); });
+    if (report.written++ == 0) report.first = name;
+    report.last = name;
+    last_step = slam.steps_done();
+    report.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+};
+
+MapFrames::MapFrames(const std::filesystem::path& output_dir, std::int64_t every, int size_px, const Slam& slam)
+    : impl_(std::make_unique<Impl>()) {
+  if (every < 1) throw std::invalid_argument("MapFrames: a frame every " + std::to_string(every) + " steps");
+  impl_->report.folder = output_dir / "frames";
+  impl_->report.every = every;
+  impl_->size_px = size_px;
+  impl_->closures_seen = slam.stats().loop_closures;  // a resumed run's earlier closures are not marked
+  const std::int64_t first_step = slam.steps_done();
+  namespace fs = std::filesystem;
+  fs::create_directories(impl_->report.folder);
+  // An earlier run's frames past this run's start (a resumed run keeps those
+  // before it), and temporaries a killed run left.
+  for (const fs::directory_entry& e : fs::directory_iterator(impl_->report.folder)) {
+    const std::string name = e.path().filename().string();
+    long long step = 0;
+    char rest[16] = {};
+    if (std::sscanf(name.c_str(), "frame_%lld%15s", &step, rest) != 2) continue;
+    const std::string suffix = rest;
+    if ((suffix == ".png" && step > first_step) || suffix == ".writing.png") fs::remove(e.path());
+  }
+}
+
+MapFrames::~MapFrames() = default;
+
+void MapFrames::after_step(const Slam& slam) {
+  Impl& m = *impl_;
+  if (slam.stats().loop_closures > m.closures_seen && !slam.trajectory().empty())
+    m.closures.push_back(slam.trajectory().size() - 1);  // the pose of the step that closed it
+  m.closures_seen = slam.stats().loop_closures;
+  if (slam.steps_done() % m.report.every == 0) m.write(slam);
+}
+
+void MapFrames::finish(const Slam& slam) {
+  if (slam.steps_done() > 0 && slam.steps_done() != impl_->last_step) impl_->write(slam);
+}
+
+const FramesReport& MapFrames::report() const { return impl_->report; }
 
 }  // namespace mspace::kernel
