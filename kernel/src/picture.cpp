@@ -310,8 +310,8 @@ void draw_top_view(cv::Mat& img, const View& v, const Slam& slam, const FrameMar
   cv::putText(img, std::to_string(static_cast<int>(bar)) + " m", bar0 + cv::Point(5, -6), cv::FONT_HERSHEY_SIMPLEX,
               0.45, {0, 0, 0}, 1, cv::LINE_AA);
   int row = 20;
-  auto legend_text = [&](const std::string& text) {
-    cv::putText(img, text, {36, row}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
+  auto legend_text = [&](const std::string& text, int x = 36) {
+    cv::putText(img, text, {x, row}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
     row += 18;
   };
   auto legend = [&](const std::string& text, const cv::Scalar& colour) {
@@ -348,7 +348,7 @@ void draw_top_view(cv::Mat& img, const View& v, const Slam& slam, const FrameMar
   }
   if (any_direction_only) {
     draw_direction_glyph(img, {19, row - 4}, {1.0, 0.0}, {0, 0, 0});
-    legend_text("direction only, position unknown: shown where last seen from, not to scale");
+    legend_text("direction only, position unknown: shown where last seen from, not to scale", 42);
   }
   if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
   if (closures > 0) {
