@@ -2,6 +2,7 @@
 //
 //   mspace run [CONFIG] [--out DIR]   a SLAM run (the built-in simulated world without CONFIG);
 //              [--set KEY=VALUE]...   any configuration key overridden (also for `mspace config`)
+//              [--frames N]           the map's picture every N steps (frames/, picture.cpp)
 //   mspace run --resume DIR           continues a run from its checkpoint
 //   mspace plugins                    every plugin found, with kind, ABI tag and parameters
 //   mspace config [CONFIG]            the fully resolved configuration

@@ -17,7 +17,7 @@ class Slam;
 
 struct RunOptions {
   bool progress = true;       ///< progress bar / lines on stderr
-  bool write_outputs = true;  ///< trajectory, map, summary, picture
+  bool write_outputs = true;  ///< trajectory, map, summary, picture, frames (output.frames)
   /// SIGINT / SIGTERM stop the run after the current step (the outputs of the
   /// steps processed are written); a second one ends the process at once.
   bool stop_on_signals = false;

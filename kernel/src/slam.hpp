@@ -220,8 +220,9 @@ class Slam {
   const RunStats& stats() const { return stats_; }
   /// Elapsed time of loading the source in this process, before the first
   /// step: its plugin library and its construction (a log read whole, scan
-  /// matching done at load time, …) and the steps run.skip_steps discards.
-  /// Not in RunStats: a resumed run loads its source again and reports that.
+  /// matching done at load time, …) and the steps run.skip_steps discards
+  /// or a resumed run replays to reach its checkpoint. Not in RunStats: a
+  /// resumed run loads its source again and reports that.
   double source_load_seconds() const { return source_load_seconds_; }
   const AssociationStats& association_stats() const { return associator_.stats(); }
   std::size_t size_hint() const;
