@@ -142,6 +142,7 @@ py::dict summary_dict(const RunSummary& s) {
   d["steps"] = s.steps;
   d["data_seconds"] = s.data_seconds;
   d["wall_seconds"] = s.wall_seconds;
+  d["source_load_seconds"] = s.source_load_seconds;
   d["state_dimension"] = s.state_dimension;
   py::dict features;
   for (const auto& [type, by_dim] : s.features_by_dim) {

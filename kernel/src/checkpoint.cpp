@@ -1,6 +1,7 @@
 // checkpoint.cpp — see checkpoint.hpp and docs/persistence.md §4.
 #include "checkpoint.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <string>
 #include <utility>
@@ -371,12 +372,15 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
   const bool source_has_state =
       guarded(config_.source.instance, *source_lib_, "has_state", [&] { return source_->has_state(); });
   if (!source_has_state) {
+    // Reading the source up to the checkpoint is part of loading it.
+    const auto replay_start = std::chrono::steady_clock::now();
     DataStep skipped;
     for (std::int64_t k = 0; k < step; ++k)
       if (!guarded(config_.source.instance, *source_lib_, "next", [&] { return source_->next(skipped); }))
         throw fail(config_.source.instance + ": the data ends after " + std::to_string(k) +
                        " steps, before the checkpoint's step " + std::to_string(step) + " (other data?)",
                    config_.source.plugin);
+    source_load_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - replay_start).count();
   }
   step_ = step;
 }

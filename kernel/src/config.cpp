@@ -45,7 +45,7 @@ const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir",     "trajectory",   "map",         "summary",
                                               "picture", "picture_size", "robot_frame", "grid",
-                                              "map_covariance"};
+                                              "map_covariance", "frames"};
 const std::vector<std::string> kGridKeys = {"enabled", "resolution", "max_range"};
 
 std::string join(const std::vector<std::string>& items) {
@@ -564,6 +564,7 @@ OutputConfig Reader::read_output(const Item* item, const std::string& run_name) 
   if (const Item* f = find(fields, "summary")) output.summary = boolean(*f);
   if (const Item* f = find(fields, "picture")) output.picture = boolean(*f);
   if (const Item* f = find(fields, "picture_size")) output.picture_size = static_cast<int>(integer(*f, 64, 20000));
+  if (const Item* f = find(fields, "frames")) output.frames = integer(*f, 0, 1e12);
   if (const Item* f = find(fields, "robot_frame")) output.robot_frame = text(*f);
   if (const Item* f = find(fields, "map_covariance")) output.map_joint_covariance = choice(*f, {"joint", "marginal"}) == 0;
   if (const Item* g = find(fields, "grid")) {
@@ -769,6 +770,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "summary" << YAML::Value << yes_no(c.output.summary);
   out << YAML::Key << "picture" << YAML::Value << yes_no(c.output.picture);
   out << YAML::Key << "picture_size" << YAML::Value << std::to_string(c.output.picture_size);
+  out << YAML::Key << "frames" << YAML::Value << std::to_string(c.output.frames);
   out << YAML::Key << "map_covariance" << YAML::Value << (c.output.map_joint_covariance ? "joint" : "marginal");
   if (!c.output.robot_frame.empty()) out << YAML::Key << "robot_frame" << YAML::Value << c.output.robot_frame;
   out << YAML::Key << "grid" << YAML::Value << YAML::BeginMap;

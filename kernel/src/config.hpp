@@ -26,6 +26,7 @@
 //   initial_pose: {pose: [6 numbers], sigma: [6 numbers]}               # angles in degrees, default 0
 //                 or `search` (localize only: the pose is found in the loaded map)
 //   output:       {dir: out/<run name>, trajectory, map, summary, picture: true, picture_size: 1000,
+//                  frames: 0 (steps between pictures of the map as the run goes; 0 = none),
 //                  map_covariance: joint | marginal,
 //                  robot_frame: <text for the pose files' headers>,
 //                  grid: {enabled: true, resolution: 0.05, max_range: 20}}
@@ -154,6 +155,8 @@ struct OutputConfig {
   std::string dir;  ///< default "out/<run name>"
   bool trajectory = true, map = true, summary = true, picture = true;
   int picture_size = 1000;  ///< pixels
+  /// frames/frame_<step>.png, the map's picture, every this many steps (0 = none; MapFrames).
+  std::int64_t frames = 0;
   /// What the robot pose is, named in the header of every pose file (e.g.
   /// "rear-axle centre"); empty: "robot base".
   std::string robot_frame;

@@ -2,6 +2,7 @@
 //
 //   mspace run [CONFIG] [--out DIR]   a SLAM run (the built-in simulated world without CONFIG);
 //              [--set KEY=VALUE]...   any configuration key overridden (also for `mspace config`)
+//              [--frames N]           the map's picture every N steps (frames/, picture.cpp)
 //   mspace run --resume DIR           continues a run from its checkpoint
 //   mspace plugins                    every plugin found, with kind, ABI tag and parameters
 //   mspace config [CONFIG]            the fully resolved configuration
@@ -15,6 +16,7 @@
 #include <filesystem>
 #include <iostream>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -58,7 +60,7 @@ struct RunCommand {
   std::string file, out, estimator, resume, map, mode;
   std::vector<std::string> sets;  ///< --set KEY=VALUE overrides of the configuration
   long long max_steps = 0;
-  std::optional<long long> seed, checkpoint_every;
+  std::optional<long long> seed, checkpoint_every, frames;
   bool quiet = false;
 };
 
@@ -72,6 +74,20 @@ int run_and_report(Slam& slam, bool quiet) {
   std::cout << "  outputs in " << result.output_dir.string() << "/ (";
   for (std::size_t i = 0; i < result.files.size(); ++i) std::cout << (i > 0 ? ", " : "") << result.files[i];
   std::cout << ")\n";
+  if (result.frames) {
+    const FramesReport& f = *result.frames;
+    std::cout << "  " << f.written << " frame(s) of the map, every " << f.every << " steps and the last, in "
+              << f.folder.string() << "/";
+    if (f.written > 0) std::cout << " (" << f.first << " .. " << f.last << ")";
+    std::ostringstream seconds;
+    seconds.precision(3);
+    seconds << f.seconds;
+    std::cout << ", " << seconds.str() << " s to draw; "
+              << (f.view_changes == 0 ? std::string("one view throughout")
+                                      : "the view grew " + std::to_string(f.view_changes) +
+                                            " time(s) to take in the map (the scale changes there)")
+              << "\n";
+  }
   if (result.checkpoints > 0)
     std::cout << "  " << result.checkpoints << " checkpoint(s) written, the last at "
               << checkpoint_dir(slam.config()).string() << "/ (" << result.checkpoint_bytes
@@ -85,7 +101,7 @@ int cmd_resume(const RunCommand& c, const CommonOptions& common) {
   if (!c.file.empty() || c.seed || !c.estimator.empty() || !c.sets.empty() || !c.map.empty() || !c.mode.empty())
     throw ConfigError(
         "--resume takes the configuration from the checkpoint: give no CONFIG, --seed, --set, --estimator, --map or "
-        "--mode (only --out, --max-steps, --checkpoint-every and --log-level)");
+        "--mode (only --out, --max-steps, --checkpoint-every, --frames and --log-level)");
   PluginRegistry registry;
   setup_registry(registry, common);
   std::unique_ptr<Slam> slam = resume_from_checkpoint(c.resume, registry, [&](RunConfig& config) {
@@ -93,6 +109,7 @@ int cmd_resume(const RunCommand& c, const CommonOptions& common) {
     if (!c.out.empty()) config.output.dir = c.out;
     if (c.max_steps > 0) config.max_steps = c.max_steps;
     if (c.checkpoint_every) config.checkpoint_every = *c.checkpoint_every;
+    if (c.frames) apply_frames_option(config, *c.frames);
   });
   kernel_log().info("resumed ", find_checkpoint_file(c.resume).string(), " (run ", slam->config().name, " of ",
                     slam->config().file.string(), ") at step ", slam->steps_done());
@@ -114,6 +131,7 @@ int cmd_run(const RunCommand& c, const CommonOptions& common) {
   request.max_steps = c.max_steps;
   request.seed = c.seed;
   request.checkpoint_every = c.checkpoint_every;
+  request.frames = c.frames;
   const RunConfig config = resolve_run_request(request, registry);
   // One line of what runs; the whole resolved configuration at debug level
   // (or with `mspace config`).
@@ -221,6 +239,9 @@ int main(int argc, char** argv) {
                   "write <out>/checkpoint/ every N steps, replacing the previous one atomically (overrides "
                   "run.checkpoint_every; 0 = none)")
       ->check(CLI::NonNegativeNumber);
+  run->add_option("--frames", run_cmd.frames,
+                  "every N steps (and after the last) write <out>/frames/frame_<step>.png, the map's picture as the run "
+                  "goes, in one view, loop closures marked (overrides output.frames; N >= 1)");
   run->add_option("--resume", run_cmd.resume,
                   "continue the run saved in this checkpoint (a checkpoint folder, or a run's output folder); the "
                   "configuration is the checkpoint's");

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
@@ -24,7 +25,8 @@ struct RunSummary {
   std::string config_file;
   long long steps = 0;
   double data_seconds = 0.0;  ///< time span covered by the data
-  double wall_seconds = 0.0;  ///< elapsed (real) time of the whole run
+  double wall_seconds = 0.0;  ///< elapsed (real) time of the whole run, from its first step
+  double source_load_seconds = 0.0;  ///< before the first step: Slam::source_load_seconds()
   int state_dimension = 0;
   /// feature-type instance → M-space dimension → count
   std::map<std::string, std::map<int, int>> features_by_dim;
@@ -120,5 +122,47 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& sum
 std::string format_summary(const RunSummary& summary, const Slam& slam);
 /// Top view of the map, the estimated and the true trajectory (OpenCV).
 void write_picture(const std::filesystem::path& file, const Slam& slam, int size_px);
+
+/// What MapFrames wrote, for the line printed at the end of a run.
+struct FramesReport {
+  std::filesystem::path folder;  ///< <output.dir>/frames
+  std::int64_t every = 0;        ///< steps between frames
+  int written = 0;
+  std::string first, last;   ///< file names of the first and the last frame written
+  int view_changes = 0;      ///< times the view had to grow (0: one scale throughout)
+  double seconds = 0.0;      ///< elapsed time of drawing and writing them
+};
+
+/// Pictures of the map as a run goes (output.frames, `--frames N`; drawn by
+/// picture.cpp): the top view of map.png, without the side view, at a fixed
+/// size, as <output.dir>/frames/frame_<step>.png after every step that is a
+/// multiple of N and after the run's last step, each written atomically;
+/// the loop closures so far are marked where the robot was when each closed.
+/// One view for all frames, so that an animation does not jump: when the
+/// source knows the world (true landmarks), their extent and the start with
+/// a tenth of it added on each side; otherwise the extent of the first frame
+/// with a quarter of it added on each side (at least 10 m across). When
+/// something drawn leaves the view it grows to take it in, a quarter added
+/// on each side again, never shrinking (view_changes counts how often). Frames of an earlier run with step numbers after this
+/// run's start are removed first, so the folder holds one run's frames.
+class MapFrames {
+ public:
+  /// Before `slam`'s first step (of this process: a resumed run's earlier
+  /// loop closures are not known by pose, so they are not marked).
+  MapFrames(const std::filesystem::path& output_dir, std::int64_t every, int size_px, const Slam& slam);
+  ~MapFrames();
+  MapFrames(const MapFrames&) = delete;
+  MapFrames& operator=(const MapFrames&) = delete;
+  /// After every step: notes a loop closure (RunStats::loop_closures grew)
+  /// and writes the step's frame when the step is a multiple of N.
+  void after_step(const Slam& slam);
+  /// After the last step: its frame, unless after_step wrote it.
+  void finish(const Slam& slam);
+  const FramesReport& report() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace mspace::kernel

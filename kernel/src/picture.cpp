@@ -2,16 +2,21 @@
 // map's features shaded by M-space dimension (with 3σ ellipses of their point
 // blocks), the estimated and the true trajectory, a scale bar and a legend.
 // Generic: a feature is drawn as it asks (Feature::drawing: polygons,
-// segments, labelled points in map coordinates) or, by default, from its
-// coordinate blocks only (a point block as a dot, several point blocks as a
-// polyline through them). When features
-// have 3-D points off the ground plane (ceiling lines, lamps) a side view
+// segments, labelled points in map coordinates, or directions known without
+// a position) or, by default, from its coordinate blocks only (a point block
+// as a dot, several point blocks as a polyline through them). When features
+// have 3-D points off the ground plane (e.g. on a ceiling) a side view
 // (x against height) is added under the top view, and single such points are
 // drawn as squares. The occupancy grid's picture (grid.png) draws the same
-// features over the grid.
+// features over the grid. MapFrames draws the top view every N steps of a
+// run in one fixed view, with the loop closures so far.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
+#include <optional>
+#include <sstream>
 #include <stdexcept>
 
 #include <Eigen/Eigenvalues>
@@ -46,7 +51,7 @@ std::vector<Eigen::Vector3d> point3d_blocks(const Feature& f) {
   return pts;
 }
 
-/// Features with 3-D points off the ground plane (ceiling lines, lamps) get a
+/// Features with 3-D points off the ground plane (e.g. on a ceiling) get a
 /// side view; a single such point is drawn as a square.
 constexpr double kOffGround = 0.05;  // m
 
@@ -75,6 +80,52 @@ cv::Scalar dim_colour(int dim, int max_dim) {
   return {static_cast<double>(230 - 150 * f), static_cast<double>(160 - 140 * f), static_cast<double>(120 - 100 * f)};
 }
 
+/// Whether the feature has a position to draw: not when all it asks to be
+/// drawn as is directions (FeatureDrawing::direction_only), e.g. a line
+/// whose M-space holds its direction only; its coordinates are then a guess.
+bool placed(const Feature& f) {
+  const std::optional<FeatureDrawing> drawing = f.drawing();
+  return !(drawing && drawing->direction_only());
+}
+
+/// Where a direction-only feature's glyphs are shown (the first column of
+/// each pair of its Direction items).
+std::vector<Eigen::Vector2d> direction_places(const Feature& f) {
+  std::vector<Eigen::Vector2d> places;
+  if (const std::optional<FeatureDrawing> drawing = f.drawing())
+    for (const DrawingItem& item : drawing->items)
+      if (item.kind == DrawingItem::Kind::Direction)
+        for (Eigen::Index i = 0; i + 1 < item.points.cols(); i += 2) places.emplace_back(item.points.col(i));
+  return places;
+}
+
+/// The glyph of a direction known without a position: a dashed double-headed
+/// arrow of fixed length in pixels (not to scale: it spans no known extent)
+/// through a small ring at the place it is shown at (where it was seen from).
+/// Dashed and thin, unlike every placed item (solid, 2 px).
+void draw_direction_glyph(cv::Mat& img, const cv::Point& at, const Eigen::Vector2d& direction,
+                          const cv::Scalar& colour) {
+  constexpr double kRing = 3.0, kHalf = 16.0, kDash = 4.0, kGap = 4.0, kHead = 5.0;  // px
+  const double norm = direction.norm();
+  if (!(norm > 0.0)) return;
+  const cv::Point2d d(direction.x() / norm, -direction.y() / norm);  // image rows grow downwards
+  const cv::Point2d c(at.x, at.y);
+  auto pt = [](const cv::Point2d& p) {
+    return cv::Point(static_cast<int>(std::lround(p.x)), static_cast<int>(std::lround(p.y)));
+  };
+  // Dashes and heads the same on both sides of the ring (-d draws the same
+  // glyph): an open head at each end, the line's sense is not known either.
+  for (const double sign : {-1.0, 1.0}) {
+    for (double s = kRing + 1.0; s < kHalf; s += kDash + kGap)
+      cv::line(img, pt(c + d * (sign * s)), pt(c + d * (sign * std::min(s + kDash, kHalf))), colour, 1, cv::LINE_AA);
+    const cv::Point2d tip = c + d * (sign * kHalf);
+    const cv::Point2d back = d * (-sign * kHead), side(-d.y * kHead * 0.6, d.x * kHead * 0.6);
+    cv::line(img, pt(tip), pt(tip + back + side), colour, 1, cv::LINE_AA);
+    cv::line(img, pt(tip), pt(tip + back - side), colour, 1, cv::LINE_AA);
+  }
+  cv::circle(img, at, static_cast<int>(kRing), colour, 1, cv::LINE_AA);
+}
+
 void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const Eigen::Matrix2d& cov,
                   const cv::Scalar& colour) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
@@ -89,15 +140,16 @@ void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const E
 
 /// The map's features over a top view: as their drawing() asks, or point
 /// blocks as dots (to scale when the feature has a footprint), several point
-/// blocks as a polyline, shaded
-/// by M-space dimension, with 3σ ellipses; shared coordinates as squares.
+/// blocks as a polyline, shaded by M-space dimension, with 3σ ellipses of
+/// placed features; shared coordinates as squares.
 void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
   for (const MapFeature& f : slam.features()) {
     const int dim = f.feature->mspace_dim();
     const int max_dim = slam.feature_types()[f.type].type->max_mspace_dim();
     const cv::Scalar colour = dim_colour(dim, max_dim);
     const std::vector<Eigen::Vector2d> pts = point_blocks(*f.feature);
-    if (const std::optional<FeatureDrawing> drawing = f.feature->drawing()) {
+    const std::optional<FeatureDrawing> drawing = f.feature->drawing();
+    if (drawing) {
       draw_feature_drawing(img, v, *drawing, colour);
     } else if (pts.size() >= 2) {
       for (std::size_t i = 0; i + 1 < pts.size(); ++i)
@@ -113,7 +165,8 @@ void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
       else
         cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
     }
-    if (dim == 0) continue;
+    // No ellipses where no position is known: they would sit at guessed points.
+    if (dim == 0 || (drawing && drawing->direction_only())) continue;
     // Covariance of x_f implied by the M-space covariance: B̃ P B̃ᵀ (eq. 11).
     const Eigen::MatrixXd Bd = f.feature->B_dual();
     const Eigen::MatrixXd C = Bd * slam.feature_covariance(f) * Bd.transpose();
@@ -134,77 +187,66 @@ void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
   }
 }
 
-/// Writes img (BGR) as a PNG.
-void encode_png(const std::filesystem::path& file, const cv::Mat& img) {
-  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
-  // Encoded with libpng's simplified API rather than OpenCV's imgcodecs, whose
-  // dependencies (GDAL, codecs, …) would add ~0.2 s of start-up to every run.
-  png_image png{};
-  png.version = PNG_IMAGE_VERSION;
-  png.width = static_cast<png_uint_32>(img.cols);
-  png.height = static_cast<png_uint_32>(img.rows);
-  png.format = PNG_FORMAT_BGR;
-  png.flags = PNG_IMAGE_FLAG_FAST;  // faster compression; a map picture is mostly flat colour
-  if (png_image_write_to_file(&png, file.string().c_str(), 0, img.data, static_cast<png_int_32>(img.step), nullptr) == 0)
-    throw std::runtime_error("cannot write picture '" + file.string() + "': " + png.message);
-}
-
-}  // namespace
-
-void draw_feature_drawing(cv::Mat& img, const View& v, const FeatureDrawing& drawing, const cv::Scalar& colour) {
-  for (const DrawingItem& item : drawing.items) {
-    const Eigen::Index n = item.points.cols();
-    if (n == 0) continue;
-    auto at = [&](Eigen::Index i) { return v.px(item.points(0, i), item.points(1, i)); };
-    switch (item.kind) {
-      case DrawingItem::Kind::Polygon:  // closed: the last point joins the first
-        for (Eigen::Index i = 0; i < n; ++i) cv::line(img, at(i), at((i + 1) % n), colour, 2, cv::LINE_AA);
-        break;
-      case DrawingItem::Kind::Segments:
-        for (Eigen::Index i = 0; i + 1 < n; i += 2) cv::line(img, at(i), at(i + 1), colour, 2, cv::LINE_AA);
-        break;
-      case DrawingItem::Kind::Points:
-        for (Eigen::Index i = 0; i < n; ++i) cv::circle(img, at(i), 3, colour, cv::FILLED, cv::LINE_AA);
-        break;
-    }
-    if (!item.label.empty())
-      cv::putText(img, item.label, at(0) + cv::Point(5, -5), cv::FONT_HERSHEY_SIMPLEX, 0.4, colour, 1, cv::LINE_AA);
-  }
-}
-
-void write_picture(const std::filesystem::path& file, const Slam& slam, int size_px) {
-  // Bounds over everything drawn.
+/// An axis-aligned extent in the map (metres).
+struct Box {
   double lo_x = 1e300, lo_y = 1e300, hi_x = -1e300, hi_y = -1e300;
-  auto grow = [&](double x, double y) {
+  bool empty() const { return lo_x > hi_x; }
+  void grow(double x, double y) {
     lo_x = std::min(lo_x, x), lo_y = std::min(lo_y, y), hi_x = std::max(hi_x, x), hi_y = std::max(hi_y, y);
-  };
-  for (const StampedPose& p : slam.trajectory()) grow(p.pose[kX], p.pose[kY]);
-  for (const StampedPose& p : slam.ground_truth()) grow(p.pose[kX], p.pose[kY]);
-  for (const MapFeature& f : slam.features())
-    if (f.feature->mspace_dim() > 0)
-      for (const Eigen::Vector2d& p : point_blocks(*f.feature)) grow(p.x(), p.y());
-  const Eigen::MatrixXd truth = slam.true_landmarks();
-  for (Eigen::Index i = 0; i < truth.cols(); ++i) grow(truth(0, i), truth(1, i));
-  if (lo_x > hi_x) lo_x = lo_y = -1, hi_x = hi_y = 1;
+  }
+  void grow(const Box& b) {
+    if (!b.empty()) grow(b.lo_x, b.lo_y), grow(b.hi_x, b.hi_y);
+  }
+  bool contains(const Box& b) const {
+    return b.empty() || (b.lo_x >= lo_x && b.lo_y >= lo_y && b.hi_x <= hi_x && b.hi_y <= hi_y);
+  }
+  /// The same, `margin` metres wider on every side.
+  Box padded(double margin) const { return {lo_x - margin, lo_y - margin, hi_x + margin, hi_y + margin}; }
+  double span() const { return std::max(hi_x - lo_x, hi_y - lo_y); }
+};
 
+/// Everything a top view draws: the paths, the placed features in the
+/// map, where direction-only ones are shown, the true landmarks.
+Box content_box(const Slam& slam) {
+  Box box;
+  for (const StampedPose& p : slam.trajectory()) box.grow(p.pose[kX], p.pose[kY]);
+  for (const StampedPose& p : slam.ground_truth()) box.grow(p.pose[kX], p.pose[kY]);
+  for (const MapFeature& f : slam.features()) {
+    if (f.feature->mspace_dim() == 0) continue;
+    for (const Eigen::Vector2d& p : placed(*f.feature) ? point_blocks(*f.feature) : direction_places(*f.feature))
+      box.grow(p.x(), p.y());
+  }
+  const Eigen::MatrixXd truth = slam.true_landmarks();
+  for (Eigen::Index i = 0; i < truth.cols(); ++i) box.grow(truth(0, i), truth(1, i));
+  return box;
+}
+
+/// The square view of size_px pixels centred on `box` (at least 1 m across).
+View square_view(Box box, int size_px) {
+  if (box.empty()) box = {-1, -1, 1, 1};
   View v;
   v.size = size_px;
-  const double span = std::max({hi_x - lo_x, hi_y - lo_y, 1.0});
+  const double span = std::max(box.span(), 1.0);
   v.scale = (size_px - 2.0 * v.margin) / span;
-  v.min_x = lo_x - 0.5 * (span - (hi_x - lo_x));
-  v.min_y = lo_y - 0.5 * (span - (hi_y - lo_y));
-  // Heights of the features off the ground plane, for the side view.
-  double lo_z = 0.0, hi_z = 0.0;
-  bool side = false;
-  for (const MapFeature& f : slam.features()) {
-    if (f.feature->mspace_dim() == 0 || !off_ground(*f.feature)) continue;
-    side = true;
-    for (const Eigen::Vector3d& p : point3d_blocks(*f.feature)) lo_z = std::min(lo_z, p.z()), hi_z = std::max(hi_z, p.z());
-  }
-  const int side_px = side ? static_cast<int>(std::lround((hi_z - lo_z) * v.scale)) + 2 * v.margin : 0;
-  cv::Mat img(size_px + side_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
-  SideView sv{&v, lo_z, size_px + side_px - v.margin};
+  v.min_x = box.lo_x - 0.5 * (span - (box.hi_x - box.lo_x));
+  v.min_y = box.lo_y - 0.5 * (span - (box.hi_y - box.lo_y));
+  return v;
+}
 
+/// The metres a square view spans inside its margins.
+double view_span(const View& v) { return (v.size - 2.0 * v.margin) / v.scale; }
+
+/// What a frame adds to the top view.
+struct FrameMarks {
+  std::int64_t step = 0;
+  const std::vector<std::size_t>* closures = nullptr;  ///< trajectory indices of the loop closures so far
+};
+
+/// The top view in the square of `v` (rows 0 … v.size of img): grid, true
+/// landmarks, paths, features, a frame's loop closures, scale bar, legend
+/// and title.
+void draw_top_view(cv::Mat& img, const View& v, const Slam& slam, const FrameMarks* frame) {
+  const double span = view_span(v);
   // Grid every 10 m (or 1 m for small worlds).
   const double grid = span > 30 ? 10.0 : 1.0;
   for (double gx = std::floor(v.min_x / grid) * grid; gx <= v.min_x + span; gx += grid)
@@ -212,6 +254,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   for (double gy = std::floor(v.min_y / grid) * grid; gy <= v.min_y + span; gy += grid)
     cv::line(img, v.px(v.min_x, gy), v.px(v.min_x + span, gy), {235, 235, 235}, 1);
 
+  const Eigen::MatrixXd truth = slam.true_landmarks();
   for (Eigen::Index i = 0; i < truth.cols(); ++i)
     cv::drawMarker(img, v.px(truth(0, i), truth(1, i)), {120, 120, 120}, cv::MARKER_CROSS, 9, 1, cv::LINE_AA);
 
@@ -248,40 +291,32 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
 
   draw_features(img, v, slam);
 
-  if (side) {
-    // Side view: x against height, the ground (z = 0) and the path on it.
-    cv::line(img, {0, size_px}, {size_px, size_px}, {180, 180, 180}, 1);
-    cv::line(img, sv.px(v.min_x, 0), sv.px(v.min_x + span, 0), {235, 235, 235}, 1);
-    for (double gz = std::ceil(lo_z); gz <= hi_z; gz += 1.0)
-      if (gz != 0.0) cv::line(img, sv.px(v.min_x, gz), sv.px(v.min_x + span, gz), {235, 235, 235}, 1);
-    for (const StampedPose& p : slam.trajectory()) img.at<cv::Vec3b>(sv.px(p.pose[kX], 0)) = {200, 80, 30};
-    for (const MapFeature& f : slam.features()) {
-      const int dim = f.feature->mspace_dim();
-      if (dim == 0 || !off_ground(*f.feature)) continue;
-      const cv::Scalar colour = dim_colour(dim, slam.feature_types()[f.type].type->max_mspace_dim());
-      const std::vector<Eigen::Vector3d> pts = point3d_blocks(*f.feature);
-      for (std::size_t i = 0; i + 1 < pts.size(); ++i)
-        cv::line(img, sv.px(pts[i].x(), pts[i].z()), sv.px(pts[i + 1].x(), pts[i + 1].z()), colour, 2, cv::LINE_AA);
-      if (pts.size() == 1) {
-        const cv::Point q = sv.px(pts[0].x(), pts[0].z());
-        cv::rectangle(img, q - cv::Point(3, 3), q + cv::Point(3, 3), colour, cv::FILLED, cv::LINE_AA);
-      }
+  // A frame's loop closures: a ring where the robot was when each closed,
+  // at that pose's current estimate.
+  const cv::Scalar closure_colour(220, 0, 220);  // magenta: unlike the paths, features and shared coordinates
+  int closures = 0;
+  if (frame != nullptr && frame->closures != nullptr)
+    for (const std::size_t i : *frame->closures) {
+      if (i >= slam.trajectory().size()) continue;
+      const Pose6& p = slam.trajectory()[i].pose;
+      cv::circle(img, v.px(p[kX], p[kY]), 10, closure_colour, 3, cv::LINE_AA);
+      ++closures;
     }
-    cv::putText(img, "side view: x (m) against height z (m), grid every 1 m", {10, size_px + 18},
-                cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
-  }
 
   // Scale bar and legend.
   const double bar = grid;
-  const cv::Point bar0(v.margin, size_px - v.margin / 2);  // under the top view
+  const cv::Point bar0(v.margin, v.size - v.margin / 2);  // under the top view
   cv::line(img, bar0, bar0 + cv::Point(static_cast<int>(bar * v.scale), 0), {0, 0, 0}, 2);
   cv::putText(img, std::to_string(static_cast<int>(bar)) + " m", bar0 + cv::Point(5, -6), cv::FONT_HERSHEY_SIMPLEX,
               0.45, {0, 0, 0}, 1, cv::LINE_AA);
   int row = 20;
+  auto legend_text = [&](const std::string& text, int x = 36) {
+    cv::putText(img, text, {x, row}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
+    row += 18;
+  };
   auto legend = [&](const std::string& text, const cv::Scalar& colour) {
     cv::line(img, {10, row - 4}, {30, row - 4}, colour, 3);
-    cv::putText(img, text, {36, row}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
-    row += 18;
+    legend_text(text);
   };
   legend("estimated trajectory", {200, 80, 30});
   if (!slam.ground_truth().empty()) {
@@ -294,6 +329,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
   if (truth.cols() > 0) legend("true landmarks (+)", {120, 120, 120});
   legend("features, darker = higher M-space dim; 3-sigma ellipses", dim_colour(1, 1));
   // One line per feature type: how many, and at which M-space dimensions.
+  bool any_direction_only = false;
   for (std::size_t t = 0; t < slam.feature_types().size(); ++t) {
     int count = 0, lowest = 1 << 30, highest = -1;
     for (const MapFeature& f : slam.features()) {
@@ -301,6 +337,7 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
       ++count;
       lowest = std::min(lowest, f.feature->mspace_dim());
       highest = std::max(highest, f.feature->mspace_dim());
+      any_direction_only = any_direction_only || !placed(*f.feature);
     }
     if (count == 0) continue;
     const FeatureTypeSlot& slot = slam.feature_types()[t];
@@ -309,9 +346,103 @@ void write_picture(const std::filesystem::path& file, const Slam& slam, int size
     if (highest > lowest) text << "-" << highest;
     legend(text.str(), dim_colour(highest, highest));
   }
+  if (any_direction_only) {
+    draw_direction_glyph(img, {19, row - 4}, {1.0, 0.0}, {0, 0, 0});
+    legend_text("direction only, position unknown: shown where last seen from, not to scale", 42);
+  }
   if (!slam.shared_coordinates().empty()) legend("shared coordinates (squares)", {0, 0, 200});
-  cv::putText(img, slam.config().name, {size_px - 220, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1, cv::LINE_AA);
+  if (closures > 0) {
+    cv::circle(img, {20, row - 4}, 6, closure_colour, 3, cv::LINE_AA);
+    legend_text("loop closed here (" + std::to_string(closures) + ")");
+  }
+  std::string title = slam.config().name;
+  if (frame != nullptr) title += ", step " + std::to_string(frame->step);
+  int baseline = 0;
+  const int title_width = cv::getTextSize(title, cv::FONT_HERSHEY_SIMPLEX, 0.5, 1, &baseline).width;
+  cv::putText(img, title, {std::min(v.size - 220, v.size - 10 - title_width), 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5,
+              {0, 0, 0}, 1, cv::LINE_AA);
+}
 
+/// Writes img (BGR) as a PNG.
+void encode_png(const std::filesystem::path& file, const cv::Mat& img) {
+  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
+  // Encoded with libpng's simplified API rather than OpenCV's imgcodecs, whose
+  // dependencies (GDAL, codecs, …) would add ~0.2 s of start-up to every run.
+  png_image png{};
+  png.version = PNG_IMAGE_VERSION;
+  png.width = static_cast<png_uint_32>(img.cols);
+  png.height = static_cast<png_uint_32>(img.rows);
+  png.format = PNG_FORMAT_BGR;
+  png.flags = PNG_IMAGE_FLAG_FAST;  // faster compression; a map picture is mostly flat colour
+  if (png_image_write_to_file(&png, file.string().c_str(), 0, img.data, static_cast<png_int_32>(img.step), nullptr) == 0)
+    throw std::runtime_error("cannot write picture '" + file.string() + "': " + png.message);
+}
+
+}  // namespace
+
+void draw_feature_drawing(cv::Mat& img, const View& v, const FeatureDrawing& drawing, const cv::Scalar& colour) {
+  for (const DrawingItem& item : drawing.items) {
+    const Eigen::Index n = item.points.cols();
+    if (n == 0) continue;
+    auto at = [&](Eigen::Index i) { return v.px(item.points(0, i), item.points(1, i)); };
+    switch (item.kind) {
+      case DrawingItem::Kind::Polygon:  // closed: the last point joins the first
+        for (Eigen::Index i = 0; i < n; ++i) cv::line(img, at(i), at((i + 1) % n), colour, 2, cv::LINE_AA);
+        break;
+      case DrawingItem::Kind::Segments:
+        for (Eigen::Index i = 0; i + 1 < n; i += 2) cv::line(img, at(i), at(i + 1), colour, 2, cv::LINE_AA);
+        break;
+      case DrawingItem::Kind::Points:
+        for (Eigen::Index i = 0; i < n; ++i) cv::circle(img, at(i), 3, colour, cv::FILLED, cv::LINE_AA);
+        break;
+      case DrawingItem::Kind::Direction:  // (place, direction) pairs
+        for (Eigen::Index i = 0; i + 1 < n; i += 2) draw_direction_glyph(img, at(i), item.points.col(i + 1), colour);
+        break;
+    }
+    if (!item.label.empty())
+      cv::putText(img, item.label, at(0) + cv::Point(5, -5), cv::FONT_HERSHEY_SIMPLEX, 0.4, colour, 1, cv::LINE_AA);
+  }
+}
+
+void write_picture(const std::filesystem::path& file, const Slam& slam, int size_px) {
+  const View v = square_view(content_box(slam), size_px);
+  const double span = view_span(v);
+  // Heights of the placed features off the ground plane, for the side view.
+  double lo_z = 0.0, hi_z = 0.0;
+  bool side = false;
+  for (const MapFeature& f : slam.features()) {
+    if (f.feature->mspace_dim() == 0 || !off_ground(*f.feature) || !placed(*f.feature)) continue;
+    side = true;
+    for (const Eigen::Vector3d& p : point3d_blocks(*f.feature)) lo_z = std::min(lo_z, p.z()), hi_z = std::max(hi_z, p.z());
+  }
+  const int side_px = side ? static_cast<int>(std::lround((hi_z - lo_z) * v.scale)) + 2 * v.margin : 0;
+  cv::Mat img(size_px + side_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+  SideView sv{&v, lo_z, size_px + side_px - v.margin};
+
+  draw_top_view(img, v, slam, nullptr);
+
+  if (side) {
+    // Side view: x against height, the ground (z = 0) and the path on it.
+    cv::line(img, {0, size_px}, {size_px, size_px}, {180, 180, 180}, 1);
+    cv::line(img, sv.px(v.min_x, 0), sv.px(v.min_x + span, 0), {235, 235, 235}, 1);
+    for (double gz = std::ceil(lo_z); gz <= hi_z; gz += 1.0)
+      if (gz != 0.0) cv::line(img, sv.px(v.min_x, gz), sv.px(v.min_x + span, gz), {235, 235, 235}, 1);
+    for (const StampedPose& p : slam.trajectory()) img.at<cv::Vec3b>(sv.px(p.pose[kX], 0)) = {200, 80, 30};
+    for (const MapFeature& f : slam.features()) {
+      const int dim = f.feature->mspace_dim();
+      if (dim == 0 || !off_ground(*f.feature) || !placed(*f.feature)) continue;
+      const cv::Scalar colour = dim_colour(dim, slam.feature_types()[f.type].type->max_mspace_dim());
+      const std::vector<Eigen::Vector3d> pts = point3d_blocks(*f.feature);
+      for (std::size_t i = 0; i + 1 < pts.size(); ++i)
+        cv::line(img, sv.px(pts[i].x(), pts[i].z()), sv.px(pts[i + 1].x(), pts[i + 1].z()), colour, 2, cv::LINE_AA);
+      if (pts.size() == 1) {
+        const cv::Point q = sv.px(pts[0].x(), pts[0].z());
+        cv::rectangle(img, q - cv::Point(3, 3), q + cv::Point(3, 3), colour, cv::FILLED, cv::LINE_AA);
+      }
+    }
+    cv::putText(img, "side view: x (m) against height z (m), grid every 1 m", {10, size_px + 18},
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1, cv::LINE_AA);
+  }
   encode_png(file, img);
 }
 
@@ -348,5 +479,96 @@ void write_grid_picture(const std::filesystem::path& file, const Slam& slam, con
               {10, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 200}, 1, cv::LINE_AA);
   encode_png(file, img);
 }
+
+// ---- Frames ---------------------------------------------------------------------
+
+struct MapFrames::Impl {
+  FramesReport report;
+  int size_px = 1000;
+  std::optional<Box> view;  ///< the view's extent (m), fixed once the first frame is drawn
+  std::int64_t last_step = -1;
+  std::int64_t closures_seen = 0;
+  std::vector<std::size_t> closures;  ///< trajectory index of each loop closure
+
+  /// The frame's file: the step zero-padded to 6 digits, so that the names
+  /// sort by step (a glob in ffmpeg or ImageMagick takes them in order).
+  static std::string file_name(std::int64_t step) {
+    char name[40];
+    std::snprintf(name, sizeof name, "frame_%06lld.png", static_cast<long long>(step));
+    return name;
+  }
+
+  /// The view for what there is to draw now: the first call sets it, later
+  /// ones only widen it when something drawn would fall outside.
+  void fit(const Slam& slam) {
+    const Box content = content_box(slam);
+    if (!view) {
+      // The world's extent when the source knows it (true landmarks): the
+      // view is then final from the first frame unless the paths leave it.
+      const bool world_known = slam.true_landmarks().cols() > 0;
+      const double margin = (world_known ? 0.1 : 0.25) * std::max(content.empty() ? 0.0 : content.span(), 1.0);
+      Box box = content.empty() ? Box{-1, -1, 1, 1} : content.padded(margin);
+      if (!world_known && box.span() < 10.0) box = box.padded(0.5 * (10.0 - box.span()));
+      view = box;
+    } else if (!view->contains(content)) {
+      Box box = *view;
+      box.grow(content);
+      view = box.padded(0.25 * box.span());
+      ++report.view_changes;
+    }
+  }
+
+  void write(const Slam& slam) {
+    const auto t0 = std::chrono::steady_clock::now();
+    fit(slam);
+    cv::Mat img(size_px, size_px, CV_8UC3, cv::Scalar(255, 255, 255));
+    const FrameMarks marks{slam.steps_done(), &closures};
+    draw_top_view(img, square_view(*view, size_px), slam, &marks);
+    const std::string name = file_name(slam.steps_done());
+    write_atomically(report.folder / name, [&](const std::filesystem::path& f) { encode_png(f, img); });
+    if (report.written++ == 0) report.first = name;
+    report.last = name;
+    last_step = slam.steps_done();
+    report.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+};
+
+MapFrames::MapFrames(const std::filesystem::path& output_dir, std::int64_t every, int size_px, const Slam& slam)
+    : impl_(std::make_unique<Impl>()) {
+  if (every < 1) throw std::invalid_argument("MapFrames: a frame every " + std::to_string(every) + " steps");
+  impl_->report.folder = output_dir / "frames";
+  impl_->report.every = every;
+  impl_->size_px = size_px;
+  impl_->closures_seen = slam.stats().loop_closures;  // a resumed run's earlier closures are not marked
+  const std::int64_t first_step = slam.steps_done();
+  namespace fs = std::filesystem;
+  fs::create_directories(impl_->report.folder);
+  // An earlier run's frames past this run's start (a resumed run keeps those
+  // before it), and temporaries a killed run left.
+  for (const fs::directory_entry& e : fs::directory_iterator(impl_->report.folder)) {
+    const std::string name = e.path().filename().string();
+    long long step = 0;
+    char rest[16] = {};
+    if (std::sscanf(name.c_str(), "frame_%lld%15s", &step, rest) != 2) continue;
+    const std::string suffix = rest;
+    if ((suffix == ".png" && step > first_step) || suffix == ".writing.png") fs::remove(e.path());
+  }
+}
+
+MapFrames::~MapFrames() = default;
+
+void MapFrames::after_step(const Slam& slam) {
+  Impl& m = *impl_;
+  if (slam.stats().loop_closures > m.closures_seen && !slam.trajectory().empty())
+    m.closures.push_back(slam.trajectory().size() - 1);  // the pose of the step that closed it
+  m.closures_seen = slam.stats().loop_closures;
+  if (slam.steps_done() % m.report.every == 0) m.write(slam);
+}
+
+void MapFrames::finish(const Slam& slam) {
+  if (slam.steps_done() > 0 && slam.steps_done() != impl_->last_step) impl_->write(slam);
+}
+
+const FramesReport& MapFrames::report() const { return impl_->report; }
 
 }  // namespace mspace::kernel

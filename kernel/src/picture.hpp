@@ -22,7 +22,9 @@ struct View {
 };
 
 /// Draws what a feature asked for (Feature::drawing): polygons closed,
-/// segments pairwise, points as dots, each item's label beside its first point.
+/// segments pairwise, points as dots, directions as a dashed double-headed
+/// arrow of fixed pixel size through a small ring (not to scale), each item's
+/// label beside its first point.
 void draw_feature_drawing(cv::Mat& img, const View& v, const FeatureDrawing& drawing, const cv::Scalar& colour);
 
 }  // namespace mspace::kernel

@@ -44,6 +44,15 @@ void warn_if_nothing_seeded(const RunConfig& config) {
 
 }  // namespace
 
+void apply_frames_option(RunConfig& config, long long every) {
+  // 0 is output.frames' "none"; on the command line an option asked for
+  // frames, so 0 is as wrong as a negative count.
+  if (every < 1)
+    throw ConfigError("--frames: " + std::to_string(every) +
+                      " is not a number of steps between frames; give N >= 1 (or leave --frames out for none)");
+  config.output.frames = every;
+}
+
 RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
   const bool map_given = !r.map.empty() || !r.mode.empty();  // apply_map_request checks the map section then
   RunConfig config = r.config_file.empty()
@@ -54,6 +63,7 @@ RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
   if (!r.output_dir.empty()) config.output.dir = r.output_dir;
   if (r.max_steps > 0) config.max_steps = r.max_steps;
   if (r.checkpoint_every) config.checkpoint_every = *r.checkpoint_every;
+  if (r.frames) apply_frames_option(config, *r.frames);
   if (r.seed) config.seed = *r.seed;
   if (!r.estimator.empty()) override_estimator(config, r.estimator, registry);
   apply_run_seed(config);

@@ -24,7 +24,11 @@ struct RunRequest {
   long long max_steps = 0;           ///< 0: the whole data
   std::optional<long long> seed;     ///< overrides run.seed
   std::optional<long long> checkpoint_every;
+  std::optional<long long> frames;   ///< --frames N: overrides output.frames; must be >= 1
 };
+
+/// --frames N into output.frames: ConfigError naming --frames unless N >= 1.
+void apply_frames_option(RunConfig& config, long long every);
 
 /// Loads the request's configuration (adding its plugin_path folders to
 /// `registry`), applies every override, sets the log level and returns the

@@ -136,6 +136,10 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
   if (options.write_outputs && slam.config().output.trajectory)
     stream = std::make_unique<TrajectoryStream>(result.output_dir, 2.0, pose_file_frame(slam, PoseFile::Robot));
   const ScanRecording recording(slam, options.write_outputs && slam.config().output.grid.enabled);
+  std::unique_ptr<MapFrames> frames;
+  if (options.write_outputs && slam.config().output.frames > 0)
+    frames = std::make_unique<MapFrames>(result.output_dir, slam.config().output.frames,
+                                         slam.config().output.picture_size, slam);
   const std::int64_t every = options.write_checkpoints ? slam.config().checkpoint_every : 0;
   const auto checkpoint = [&] {
     const auto t0 = std::chrono::steady_clock::now();
@@ -152,6 +156,7 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
       ++done;
       progress.update(static_cast<std::size_t>(slam.steps_done()), [&] { return status_line(slam); });
       if (stream) stream->append(slam.trajectory());
+      if (frames) frames->after_step(slam);
       if (options.after_step) options.after_step(done);
       if (signals && signals->signal() != 0) {
         result.stop_signal = signals->signal();
@@ -180,6 +185,10 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
     throw;
   }
   progress.finish(static_cast<std::size_t>(slam.steps_done()), status_line(slam));
+  if (frames) {
+    frames->finish(slam);
+    result.frames = frames->report();
+  }
   result.summary = summarize(slam, elapsed());
   if (result.stop_signal != 0) {
     const std::size_t total = slam.size_hint();

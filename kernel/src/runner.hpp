@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,7 +17,7 @@ class Slam;
 
 struct RunOptions {
   bool progress = true;       ///< progress bar / lines on stderr
-  bool write_outputs = true;  ///< trajectory, map, summary, picture
+  bool write_outputs = true;  ///< trajectory, map, summary, picture, frames (output.frames)
   /// SIGINT / SIGTERM stop the run after the current step (the outputs of the
   /// steps processed are written); a second one ends the process at once.
   bool stop_on_signals = false;
@@ -37,6 +38,7 @@ struct RunResult {
   std::filesystem::path output_dir;
   int stop_signal = 0;  ///< the signal that interrupted the run, 0 if none
   std::vector<std::string> files;  ///< the output files written (names in output_dir)
+  std::optional<FramesReport> frames;  ///< with output.frames: the pictures of the map written as the run went
 };
 
 /// Runs `slam` to the end of its data. Outputs: the trajectory is streamed to

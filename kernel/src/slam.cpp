@@ -120,7 +120,9 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     lib = registry.load(inst.plugin);
     return registry.create<T>(inst.plugin, kind, args);
   };
+  const auto source_start = Clock::now();
   source_ = make(config_.source, PluginKind::Source, static_cast<DataSource*>(nullptr), source_lib_);
+  source_load_seconds_ = seconds_since(source_start);
   motion_ = make(config_.motion, PluginKind::MotionModel, static_cast<MotionModel*>(nullptr), motion_lib_);
   estimator_ = make(config_.estimator, PluginKind::Estimator, static_cast<Estimator*>(nullptr), estimator_lib_);
 
@@ -179,7 +181,9 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     if (!problem.empty()) throw ConfigError(config_.file.string() + ": " + problem);
   }
   if (config_.map.mode != MapConfig::Mode::Mapping) load_map();
+  const auto skip_start = Clock::now();
   skip_data_steps();
+  source_load_seconds_ += seconds_since(skip_start);
 }
 
 Slam::~Slam() {

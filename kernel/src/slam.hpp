@@ -233,6 +233,12 @@ class Slam {
   /// Current value of a shared coordinate (from its first member).
   Eigen::VectorXd shared_value(const SharedCoordinate& c) const;
   const RunStats& stats() const { return stats_; }
+  /// Elapsed time of loading the source in this process, before the first
+  /// step: its plugin library and its construction (a log read whole, scan
+  /// matching done at load time, …) and the steps run.skip_steps discards
+  /// or a resumed run replays to reach its checkpoint. Not in RunStats: a
+  /// resumed run loads its source again and reports that.
+  double source_load_seconds() const { return source_load_seconds_; }
   const AssociationStats& association_stats() const { return associator_.stats(); }
   std::size_t size_hint() const;
   Eigen::MatrixXd true_landmarks() const;
@@ -383,6 +389,7 @@ class Slam {
   };
   PendingClosure pending_closure_;
   StepObserver step_observer_;
+  double source_load_seconds_ = 0.0;
 
   // Saved maps (map_session.cpp).
   std::optional<MapSessionReport> map_session_;

@@ -309,6 +309,15 @@ Eigen::MatrixXd HLineFeature::symmetry_directions() const {
 
 std::optional<double> HLineFeature::footprint_radius() const { return 0.5 * line_geometry(x_).L; }
 
+std::optional<FeatureDrawing> HLineFeature::drawing() const {
+  if (mdim_ != 1) return std::nullopt;
+  const Vec2 t = (x_.segment<2>(3) - x_.head<2>()).normalized();
+  // Without a stored observation (not reached by a line that extended to
+  // dim 1, which keeps the planes it extended from) the anchor stands in.
+  const Vec2 seen_from = observations_.empty() ? anchor_ : Vec2(observations_.back().plane.o.head<2>());
+  return FeatureDrawing{{direction_item(seen_from, std::atan2(t.y(), t.x()))}};
+}
+
 SavedFeature HLineFeature::save() const {
   SavedFeature s{x_, mdim_, anchor_, {}, kSaveVersion};
   if (!observations_.empty()) {

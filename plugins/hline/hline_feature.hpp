@@ -123,6 +123,12 @@ class HLineFeature : public Feature {
   Eigen::MatrixXd symmetry_directions() const override;
   /// Half the length.
   std::optional<double> footprint_radius() const override;
+  /// Dim 1: the direction alone (DrawingItem::Kind::Direction), shown at the
+  /// camera centre of the newest stored observation — the end points there
+  /// are a guess at initial_height, not a position. Other dims: the generic
+  /// drawing (a tentative line is drawn as a tentative feature; at dim 3 the
+  /// end points are the line).
+  std::optional<FeatureDrawing> drawing() const override;
   /// Version 1: extra = the anchor (x, y); arrays "observations" (a column
   /// per stored observation: the plane's c, C_c column-major and camera
   /// centre o, the rays to the end points, the sensor view packed by

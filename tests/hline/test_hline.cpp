@@ -621,6 +621,48 @@ const InverseHeightPrior kPrior{0.5, 0.25};
 // plane of a neighbour 0.12 m away (3° off from there) is still rejected
 // outright, and one of the same line accepted. (In (offset, height) the
 // planes of both lines meet on the camera path itself, and pass.)
+// Drawing (Feature::drawing): while only the direction is in the M-space
+// (dim 1) the end points are a guess at initial_height, so the line asks to
+// be drawn as a direction alone — a Direction item parallel to it, shown at
+// the newest camera centre — and nothing placed; tentative (dim 0) and
+// placed (dim 3) lines keep the generic drawing of their end points.
+TEST(HLine, DrawnAsItsDirectionOnlyWhileThePositionIsAGuess) {
+  const Vec6 truth = test_line();
+  const Pass pass = camera_pass(truth, Vec2(-1.5, -1.0), Vec2(1.5, 1.5), 60, 1.0, 23);
+  HLineConfig config;
+  config.max_path_distance = 100.0;
+  HLineType type(config);
+  std::unique_ptr<Feature> f;
+  int seen_at[4] = {0, 0, 0, 0};
+  for (const Observation& o : pass.obs) {
+    if (!f) f = type.create(o.m, o.view);
+    ASSERT_TRUE(f);
+    f->add_dense_information(o.m, o.view);
+    f->extend(o.view);
+    const int dim = f->mspace_dim();
+    ++seen_at[dim];
+    const std::optional<FeatureDrawing> drawing = f->drawing();
+    if (dim != 1) {
+      EXPECT_FALSE(drawing.has_value()) << "dim " << dim;
+      continue;
+    }
+    ASSERT_TRUE(drawing.has_value());
+    EXPECT_TRUE(drawing->direction_only());
+    ASSERT_EQ(drawing->items.size(), 1u);
+    const DrawingItem& item = drawing->items.front();
+    ASSERT_EQ(item.kind, DrawingItem::Kind::Direction);
+    ASSERT_EQ(item.points.cols(), 2);
+    const LineGeometry g = line_geometry(f->coords());
+    const Vec2 d = item.points.col(1);
+    EXPECT_NEAR(d.norm(), 1.0, 1e-12);
+    EXPECT_NEAR(d.x() * g.t.y() - d.y() * g.t.x(), 0.0, 1e-12);  // parallel to the line
+    const auto* hf = dynamic_cast<const HLineFeature*>(f.get());
+    EXPECT_LT((Vec2(item.points.col(0)) - hf->observations().back().plane.o.head<2>()).norm(), 1e-12);
+  }
+  EXPECT_GT(seen_at[1], 0) << "the pass never held the line at dim 1";
+  EXPECT_GT(seen_at[3], 0);
+}
+
 TEST(HLine, APlaneFromTheSameViewpointIsTestedByItsAngleWhateverTheHeight) {
   const Vec6 edge = corridor_line(-0.48, 2.6), tile = corridor_line(-0.6, 2.6);
   const std::vector<PlaneObservation> stored = planes_along_x(edge, 20);

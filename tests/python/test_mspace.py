@@ -80,6 +80,7 @@ class RunTest(TempDirTest):
         summary = run.run(progress=False)
         self.assertEqual(summary["steps"], run.steps_done)
         self.assertIsNone(summary["interrupted"])
+        self.assertGreater(summary["source_load_seconds"], 0.0)  # timed on its own, before the first step
         est_t, est = run.evaluated_trajectory()
         ref_t, ref = run.ground_truth()
         self.assertGreater(len(ref_t), 100)

@@ -23,11 +23,14 @@
 // run worse than without loop closing by more than 10 %), not those figures.
 #include <gtest/gtest.h>
 
+#include <png.h>
+
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "building_log.hpp"
 #include "config.hpp"
@@ -115,5 +118,60 @@ TEST(LoopClosingRun, LongLoopIsNotClosedByAChanceFit) { check("long_loop", 2, fa
 // without, 1.730 m with — right closures that leave the smoothed map slightly
 // worse (README, "The gap buildings under the smoother"), inside the 10 %.
 TEST(LoopClosingRun, LRingClosesAfterGapsWithoutAFalseClosure) { check("l_ring", 2, true); }
+
+// Frames (output.frames, MapFrames) mark where the loop closed: on the ring
+// with a logging gap (one closure), a magenta ring at the robot's pose of the
+// closing step appears in the frames from that step on and in none before.
+TEST(LoopClosingRun, FramesMarkTheLoopClosureFromItsStepOn) {
+  const fs::path dir = building_with_gaps("ring", 1);
+  set_log_level(LogLevel::Warn);
+  setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunConfig config = load_config(fs::path(MSPACE_SOURCE_DIR) / "config" / "sim_building.yaml", registry);
+  config.source.params.set("odometry", std::string("wheel"));
+  config.association.loop_closing = true;
+  override_estimator(config, "smoother", registry);
+  const fs::path out = fs::path(MSPACE_BINARY_DIR) / "test-output" / "loop_closing_run" / "frames";
+  fs::remove_all(out);
+  config.output.dir = out.string();
+  config.output.trajectory = config.output.map = config.output.summary = config.output.picture = false;
+  config.output.grid.enabled = false;
+  config.output.picture_size = 400;
+  config.output.frames = 200;
+  Slam slam(config, registry);
+  RunOptions options;
+  options.progress = false;
+  std::int64_t closed_at = -1;  // the step of the first closure
+  options.after_step = [&](std::size_t) {
+    if (closed_at < 0 && slam.stats().loop_closures > 0) closed_at = slam.steps_done();
+  };
+  const RunResult result = run_to_end(slam, options);
+  ASSERT_GE(slam.stats().loop_closures, 1);
+  ASSERT_TRUE(result.frames.has_value());
+  int before = 0, after = 0;
+  for (const fs::directory_entry& e : fs::directory_iterator(out / "frames")) {
+    png_image image{};
+    image.version = PNG_IMAGE_VERSION;
+    ASSERT_NE(png_image_begin_read_from_file(&image, e.path().c_str()), 0) << e.path();
+    image.format = PNG_FORMAT_BGR;
+    std::vector<unsigned char> px(PNG_IMAGE_SIZE(image));
+    ASSERT_NE(png_image_finish_read(&image, nullptr, px.data(), 0, nullptr), 0) << e.path();
+    int marked = 0;  // pixels of the marker's colour exactly, (B, G, R) = (220, 0, 220)
+    for (std::size_t i = 0; i + 2 < px.size(); i += 3) marked += px[i] == 220 && px[i + 1] == 0 && px[i + 2] == 220;
+    const long long step = std::stoll(e.path().stem().string().substr(6));  // frame_<step>
+    if (step < closed_at) {
+      ++before;
+      EXPECT_EQ(marked, 0) << e.path().filename() << ", before the closure at step " << closed_at;
+    } else {
+      ++after;
+      EXPECT_GT(marked, 0) << e.path().filename() << ", after the closure at step " << closed_at;
+    }
+  }
+  std::cout << "loop closed at step " << closed_at << "; " << before << " frames before, " << after << " from then on ("
+            << result.frames->view_changes << " view changes)\n";
+  EXPECT_GT(before, 0);
+  EXPECT_GT(after, 0);
+}
 
 }  // namespace

@@ -24,9 +24,12 @@
 // FeatureType::from_true_shape — the extractor ↔ feature contract check;
 // Feature::drawing with FeatureDrawing/DrawingItem — the picture hook;
 // CekfFilter in the SDK library, mspace/cekf_filter.hpp, for the smoother's
-// running filter).
+// running filter). Minor versions add without changing any layout (5.1:
+// DrawingItem::Kind::Direction, direction_item and
+// FeatureDrawing::direction_only — a kernel of 5.0 would draw nothing for a
+// Direction item).
 #define MSPACE_SDK_VERSION_MAJOR 5
-#define MSPACE_SDK_VERSION_MINOR 0
+#define MSPACE_SDK_VERSION_MINOR 1
 
 #define MSPACE_ABI_STR2(x) #x
 #define MSPACE_ABI_STR(x) MSPACE_ABI_STR2(x)

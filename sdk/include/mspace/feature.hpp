@@ -96,6 +96,13 @@ struct DrawingItem {
     Polygon,   ///< a closed outline through the columns of `points`
     Segments,  ///< separate segments: columns (0, 1), (2, 3), …
     Points,    ///< a dot at each column
+    /// Directions known without a position (e.g. a ceiling line whose
+    /// M-space holds its direction only): columns (0, 1), (2, 3), … are
+    /// pairs (where to show it, unit direction). The picture draws a glyph of
+    /// a fixed size in pixels, not to scale, centred where the pair says —
+    /// a place the feature was seen from, not a place it is at — in a style
+    /// no placed item has. Build it with direction_item().
+    Direction,
   };
   Kind kind = Kind::Points;
   Eigen::Matrix2Xd points;
@@ -103,7 +110,16 @@ struct DrawingItem {
 };
 struct FeatureDrawing {
   std::vector<DrawingItem> items;
+  /// Whether nothing of the drawing is placed in the map: every item is a
+  /// Direction (a picture then draws no position ellipses for the feature
+  /// and leaves it out of its extent and its side view).
+  bool direction_only() const;
 };
+
+/// The Direction item of the undirected line direction `angle` (rad, from the
+/// map's x axis; θ and θ + π are the same), shown at `shown_at` (map x, y),
+/// e.g. the sensor position it was last seen from.
+DrawingItem direction_item(const Eigen::Vector2d& shown_at, double angle, std::string label = {});
 
 /// Shared coordinates (T-RO §VI): what a feature proposes when one of its
 /// coordinate blocks is to be shared with a block of another feature — the
@@ -176,9 +192,11 @@ class Feature {
   /// around its point block, e.g. a tree trunk's; std::nullopt draws a dot.
   virtual std::optional<double> footprint_radius() const { return std::nullopt; }
 
-  /// For pictures only (map.png): how the feature looks from above, in map
-  /// coordinates (x, y). std::nullopt (the default) keeps the generic
-  /// drawing: the point blocks joined in order, or footprint_radius().
+  /// For pictures only (map.png, the frames of output.frames): how the
+  /// feature looks from above, in map coordinates (x, y). std::nullopt (the
+  /// default) keeps the generic drawing: the point blocks joined in order, or
+  /// footprint_radius(). A feature whose M-space holds no position yet (a
+  /// direction only) returns Direction items, not its guessed coordinates.
   virtual std::optional<FeatureDrawing> drawing() const { return std::nullopt; }
 
   // ---- Shared coordinates (T-RO §VI, eq. 33) -------------------------------
