@@ -303,6 +303,19 @@ void draw_top_view(cv::Mat& img, const View& v, const Slam& slam, const FrameMar
       ++closures;
     }
 
+  // initial_pose: search — where the run found itself in the map (the poses
+  // before it were moved there with it): an orange ring and tick along the heading.
+  const cv::Scalar found_colour(0, 140, 255);
+  std::optional<Slam::MapSessionReport::Localization> found;
+  if (const auto m = slam.map_session_report(); m && m->localized) found = m->localized;
+  if (found) {
+    const cv::Point at = v.px(found->x, found->y);
+    cv::circle(img, at, 9, found_colour, 3, cv::LINE_AA);
+    cv::line(img, at, at + cv::Point(static_cast<int>(std::lround(18 * std::cos(found->theta))),
+                                      -static_cast<int>(std::lround(18 * std::sin(found->theta)))),
+             found_colour, 3, cv::LINE_AA);
+  }
+
   // Scale bar and legend.
   const double bar = grid;
   const cv::Point bar0(v.margin, v.size - v.margin / 2);  // under the top view
@@ -354,6 +367,10 @@ void draw_top_view(cv::Mat& img, const View& v, const Slam& slam, const FrameMar
   if (closures > 0) {
     cv::circle(img, {20, row - 4}, 6, closure_colour, 3, cv::LINE_AA);
     legend_text("loop closed here (" + std::to_string(closures) + ")");
+  }
+  if (found) {
+    cv::circle(img, {20, row - 4}, 6, found_colour, 3, cv::LINE_AA);
+    legend_text("found in the map here at step " + std::to_string(found->step) + " (initial_pose: search)");
   }
   std::string title = slam.config().name;
   if (frame != nullptr) title += ", step " + std::to_string(frame->step);
