@@ -59,10 +59,11 @@ void Slam::load_map() {
   const StoredMap map = read_map_file(file, "map");  // the whole file, checked
   const char* mode = map_mode_name(config_.map.mode);
   const auto fail = [&](const std::string& what) { return PersistenceError(file, what); };
-  if (problem_)
+  if (problem_ && config_.map.mode == MapConfig::Mode::Localize)
     throw fail(std::string("map.mode ") + mode + ": estimator '" + config_.estimator.plugin +
-               "' re-linearises (it records a nonlinear problem, for which a loaded map has no factors); the map "
-               "modes need an estimator that does not (`mspace plugins` lists the estimators)");
+               "' re-linearises (it records a nonlinear problem; localize's consider update keeps the map out of "
+               "the estimator, so there is nothing to re-linearise against); localize needs an estimator that does "
+               "not (`mspace plugins` lists the estimators); extend works with it");
   if (!map.covariance)
     throw fail("the map holds no covariance (format version " + std::to_string(map.format_version) +
                "; maps hold it from version 3): re-create it with this build of mspace");
@@ -132,14 +133,19 @@ void Slam::load_map() {
   //      as the saved run would have.
   const bool from_end = config_.map.start_at_map_end;
   if (from_end) x_r_ = map.robot_pose;
+  Eigen::MatrixXd P_robot;
   if (localize || !from_end) {
-    reset_estimator(initial_covariance());
+    P_robot = initial_covariance();
   } else if (cov.first_row != k) {
     throw fail("start: map_end needs the robot coordinates the map's run estimated (" +
                std::to_string(cov.first_row) + " rows; this run's motion model estimates " + std::to_string(k) + ")");
   } else {
-    reset_estimator(cov.joint->topLeftCorner(k, k));
+    P_robot = cov.joint->topLeftCorner(k, k);
   }
+  reset_estimator(P_robot);
+  // A re-linearising estimator's problem starts again at this pose; the map's
+  // rows enter it below as a linear factor (Problem::added).
+  if (problem_) problem_->start(P_robot);
   if (!localize && cov.rows > 0) {
     const Eigen::MatrixXd& P = *cov.joint;
     const Eigen::MatrixXd P_mm = P.bottomRightCorner(cov.rows, cov.rows);
@@ -162,6 +168,7 @@ void Slam::load_map() {
     if (first != k || estimator_->dim() != k + cov.rows)
       throw fail("estimator '" + config_.estimator.plugin + "' put the map's " + std::to_string(cov.rows) +
                  " rows at " + std::to_string(first) + " (expected " + std::to_string(k) + ")");
+    if (problem_) problem_->added(aug, first);  // the old session marginalised: the map as a prior
   }
   report.searched = config_.map.search_pose;
   map_session_ = report;

@@ -76,6 +76,11 @@ void Problem::sync_rows() {
 // ---- recording ----------------------------------------------------------------
 
 void Problem::start(const Eigen::MatrixXd& P0) {
+  factors_.clear();  // (a restart before the first step: a loaded map moves the start)
+  pending_.clear();
+  pending_records_.clear();
+  frozen_ = 0;
+  acc_.resize(0);
   sync_rows();
   nodes_ = {*c_.x_r};
   records_ = {0};
@@ -173,9 +178,15 @@ void Problem::freeze_feature(int feature_id) {
 void Problem::extended(const MapFeature& mf, const StateAugmentation& aug, int first) {
   sync_rows();
   freeze_feature(mf.id);
+  added(aug, first);
+}
+
+void Problem::added(const StateAugmentation& aug, int first) {
+  sync_rows();
   // δx_new − J_sensor J_sr δx_r − J_own δx_p,old = w ~ N(0, C_new): a linear
   // factor on the current node, the old rows and the new rows, zero at the
-  // values of this moment (the extension's own estimate).
+  // values of this moment (the extension's own estimate; for a loaded map,
+  // the map's joint covariance given the robot).
   const auto n = aug.C_new.rows();
   auto f = std::make_unique<Factor>();
   f->kind = FactorKind::Linear;

@@ -98,7 +98,9 @@ class Problem final : public NonlinearProblem {
   ~Problem() override;
 
   // ---- recording (Slam) ------------------------------------------------------
-  /// The prior of the first pose node (the current pose) with covariance P0.
+  /// The prior of the first pose node (the current pose) with covariance P0;
+  /// called again before the first step (a loaded map moved the start), it
+  /// starts afresh.
   void start(const Eigen::MatrixXd& P0);
   /// Before the robot moves by the odometry increment x_d over dt (empty: no
   /// motion); `record` is the index the step will have in the trajectory.
@@ -118,6 +120,11 @@ class Problem final : public NonlinearProblem {
   /// `mf` extended: aug (over robot rows and the old rows) added rows
   /// [first, first + aug.C_new.rows()). Freezes mf's live factors.
   void extended(const MapFeature& mf, const StateAugmentation& aug, int first);
+  /// Rows [first, first + aug.C_new.rows()) entered the estimator by `aug`
+  /// (δx_new = J δx_old + w, w ~ N(0, C_new)): that relation as a linear
+  /// factor. A loaded map enters this way (extend): the old session's poses
+  /// are marginalised, its map is a Gaussian prior with the map's joint covariance.
+  void added(const StateAugmentation& aug, int first);
   /// Before share_block: keeps B(x_f) of both features.
   void before_join(const MapFeature& a, const MapFeature& b);
   /// After the join's rows were added (a, b with their new state_idx) and

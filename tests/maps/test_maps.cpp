@@ -880,6 +880,18 @@ TEST(Extend, SimWorldSecondLapExtendsTheFirst) {
   EXPECT_GT(s.changed, 20);  // the second lap refines the first lap's features
 }
 
+// Under the smoother the old session's poses are marginalised: the map enters
+// the new session's nonlinear problem as one linear factor with the map's
+// joint covariance (and, from map_end, its correlation with the robot),
+// Problem::added. The second session re-linearises its own factors against
+// that prior; the two sessions together must be as good as the single run.
+TEST(Extend, SimWorldSecondLapExtendsTheFirstUnderTheSmoother) {
+  const Sessions s = map_in_two_sessions("sim_points.yaml", "smoother");
+  EXPECT_LE(s.two_ate, 1.05 * s.single_ate);
+  EXPECT_GT(s.loaded, 50);
+  EXPECT_GT(s.changed, 20);
+}
+
 TEST(Extend, VictoriaParkSecondHalfExtendsTheFirst) {
   if (!have_victoria_park()) GTEST_SKIP() << "Victoria Park data not found in " << datasets() / "victoria_park";
   const Sessions s = map_in_two_sessions("victoria_park.yaml", "");
