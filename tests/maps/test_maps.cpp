@@ -520,7 +520,7 @@ bool have_intel() {
 // it (from where the first half ended). Its relations (Kümmerle et al.; those
 // with both ends in the second half) must be no worse than the same relations
 // of the single full run (rotation asserted; translation reported: see below).
-// The configuration's smoother re-linearises, which the map modes refuse: all
+// The configuration's smoother re-linearises, which localize refuses: all
 // three runs use the ekf.
 TEST(Localize, IntelSecondHalfInTheMapOfTheFirst) {
   if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
