@@ -593,7 +593,10 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
      << st.seconds_extract << " s, associate "
      << st.seconds_associate << " s, update " << st.seconds_update << " s, dense " << st.seconds_dense
      << " s, extend " << st.seconds_extend << " s";
-  if (st.seconds_loops > 0.0) os << ", loop closing " << st.seconds_loops << " s";
+  if (st.seconds_loops > 0.0) {  // map matching: loop closing, or an initial_pose: search
+    const auto m = slam.map_session_report();
+    os << (m && m->searched ? ", pose search " : ", loop closing ") << st.seconds_loops << " s";
+  }
   os << " (total of the steps " << total << " s)\n";
   // What the source's ground truth is: the truth, or a named reference.
   const std::string& reference = slam.config().evaluation.reference;
