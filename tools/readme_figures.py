@@ -2,7 +2,7 @@
 """Check the result figures quoted in README.md against the runs that produce them.
 
     tools/readme_figures.py [--check]        run the configurations, compare, exit 1 on a drift
-    tools/readme_figures.py --update         rewrite the drifted numbers in README.md in place
+    tools/readme_figures.py --update         rewrite the quoted numbers in README.md that moved
     tools/readme_figures.py --runs sim_points,intel_walls   only those runs (what CTest does)
     tools/readme_figures.py --all            also the slow runs (the rendered ceiling route)
     tools/readme_figures.py --list           the runs and figures known, nothing is run
@@ -61,7 +61,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from decimal import ROUND_HALF_EVEN, Decimal
 from pathlib import Path
 from typing import Callable, Union
@@ -455,6 +455,7 @@ def main() -> int:
             continue
         value = measure(fig, result)
         checked += 1
+        # (1 + 1e-12): a value exactly half a unit off must not fail on the binary round-off of the subtraction.
         ok = abs(float(value) - float(q.value)) <= tolerance(fig, q) * (1 + 1e-12)
         drifts += not ok
         rounded = q.format(value)
@@ -462,11 +463,11 @@ def main() -> int:
             edits.append((q, rounded))
         rows.append((q, q.text, f"{value:.6g}", describe_tolerance(fig, q), "OK" if ok else "DRIFT"))
 
-    widths = [max(len(f"{r[0].fig_id} (l.{r[0].line})") for r in rows)] if rows else [6]
-    print(f"\n{'figure (README line)':<{max(widths[0], 20)}}  {'README':>10}  {'measured':>12}  "
-          f"{'tolerance':<12}  status")
+    label = lambda q: f"{q.fig_id} (l.{q.line})"  # noqa: E731
+    width = max([20] + [len(label(row[0])) for row in rows])
+    print(f"\n{'figure (README line)':<{width}}  {'README':>10}  {'measured':>12}  {'tolerance':<13}  status")
     for q, said, got, tol, status in rows:
-        print(f"{q.fig_id + f' (l.{q.line})':<{max(widths[0], 20)}}  {said:>10}  {got:>12}  {tol:<12}  {status}")
+        print(f"{label(q):<{width}}  {said:>10}  {got:>12}  {tol:<13}  {status}")
     for name, result in summaries.items():
         if isinstance(result, str):
             print(f"SKIP {name}: {result}")
@@ -480,6 +481,9 @@ def main() -> int:
         args.readme.write_text(readme, encoding="utf-8")
         print(f"{len(edits)} numbers rewritten in {args.readme}")
         return 0
+    if drifts:
+        print("A quoted figure is not what its run gives: if the change that moved it is right, run "
+              "tools/readme_figures.py --update (--all for the ceiling rows) and review git diff README.md.")
     if checked == 0:
         return SKIPPED
     return 1 if drifts else 0
