@@ -22,7 +22,7 @@ PACKAGES=(
   libeigen3-dev libopencv-dev libboost-dev libboost-filesystem-dev
   libyaml-cpp-dev libspdlog-dev libcli11-dev libpng-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  python3-dev pybind11-dev python3-numpy
+  python3-dev pybind11-dev python3-numpy python3-yaml
   librosbag-storage-dev libsensor-msgs-dev libnav-msgs-dev libtf2-msgs-dev
 )
 # The fuzz harnesses: clang, and libFuzzer / ASan / UBSan (only recommended by clang-14).
