@@ -696,6 +696,18 @@ TEST(Localize, KidnappedRobotFindsItselfFromTwentyRandomStarts) {
     PluginRegistry registry;
     const RunConfig c = load("sim_points.yaml", "ekf", registry, scratch("kidnapped"), 300, sim_world(100 + i, 1.0));
     const Kidnapped k = kidnapped_run(c, registry, map_dir, skip);
+    if (i == 0 && k.localized) {  // what the run wrote says so too
+      const auto text = [](const fs::path& f) {
+        std::ifstream in(f);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+      };
+      const std::string summary = text(fs::path(c.output.dir) / "summary.yaml");
+      EXPECT_NE(summary.find("pose_search:"), std::string::npos) << summary;
+      EXPECT_NE(summary.find("localized: true"), std::string::npos) << summary;
+      const std::string trajectory = text(fs::path(c.output.dir) / "trajectory.tum");
+      EXPECT_NE(trajectory.find("the run found its pose there at step"), std::string::npos)
+          << trajectory.substr(0, 400);
+    }
     std::cout << "[ kidnapped  ] start at step " << skip << ": "
               << (k.localized ? "localized after " + std::to_string(k.seconds) + " s, error " +
                                     std::to_string(k.position_error) + " m, " + std::to_string(k.heading_error) +
