@@ -635,6 +635,13 @@ FeatureShape feature_shape(const MapFeature& mf) {
   return s;
 }
 
+FeatureShape feature_shape(const MapFeature& mf, const Eigen::MatrixXd& P_p) {
+  FeatureShape s = feature_shape(mf);
+  const Eigen::MatrixXd Bt = mf.feature->B_dual();
+  s.cov = Bt * P_p * Bt.transpose();
+  return s;
+}
+
 bool linearize_coincidence(const MapFeature& a, const MapFeature& b, Eigen::VectorXd& r, Eigen::MatrixXd& J,
                            std::vector<int>& idx) {
   CoincidenceResidual res;

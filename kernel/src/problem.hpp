@@ -58,6 +58,9 @@ struct FeatureTypeSlot;
 /// A feature as map matching sees it (loop_closing.hpp): type, layout, x_f and
 /// its symmetry directions; no covariance.
 FeatureShape feature_shape(const MapFeature& mf);
+/// The same with its covariance: B̃ P_p B̃ᵀ from P_p, the covariance of its
+/// M-space rows (eq. 11: δx_f = B̃ δx_p).
+FeatureShape feature_shape(const MapFeature& mf, const Eigen::MatrixXd& P_p);
 
 /// The coincidence of features a and b (one object, a loop closure) at their
 /// current coordinates: r = Nᵀ (x_a − x_b) and J = Nᵀ (B̃_a  −B̃_b) over

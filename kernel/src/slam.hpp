@@ -299,6 +299,14 @@ class Slam {
   /// `matched`: (feature index, its candidate) of each match.
   void note_anchor(const std::vector<std::pair<int, const Candidate*>>& matched);
   void check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths, const DataStep& data);
+  /// A number that changes when the set of features `idx` does: a search
+  /// with the same local map gives the same answer (slam_loop_closure.cpp).
+  std::int64_t local_map_signature(const std::vector<int>& idx) const;
+  /// features_[i] as map matching sees it, with its estimator covariance.
+  FeatureShape estimated_shape(int i) const;
+  /// The map-matching settings loop closing and the pose search share
+  /// (association.loop_*, the gate's probability, the placement's σ bound).
+  MapMatchOptions map_match_options() const;
   /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
   bool relinearize(bool end_of_data);
   SensorView sensor_view(int sensor_index, double t) const;

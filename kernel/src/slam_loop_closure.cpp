@@ -148,6 +148,32 @@ void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<d
   }
 }
 
+std::int64_t Slam::local_map_signature(const std::vector<int>& idx) const {
+  // (kept below 2^50 so that a checkpoint stores it exactly as a double)
+  constexpr std::int64_t kModulus = std::int64_t{1} << 50;
+  auto signature = static_cast<std::int64_t>(idx.size());
+  for (int i : idx) signature = (signature * 1009 + features_[static_cast<std::size_t>(i)].id) % kModulus;
+  return signature;
+}
+
+FeatureShape Slam::estimated_shape(int i) const {
+  const MapFeature& mf = features_[static_cast<std::size_t>(i)];
+  FeatureShape s = feature_shape(mf, checked_marginal(mf.state_idx));
+  s.feature = i;
+  return s;
+}
+
+MapMatchOptions Slam::map_match_options() const {
+  const AssociationConfig& a = config_.association;
+  MapMatchOptions o;
+  o.min_matches = a.loop_min_matches;
+  o.ambiguity_ratio = a.loop_ambiguity_ratio;
+  o.probability = a.gate_probability;
+  o.max_translation_std = kMaxMotionSigmaTranslation;
+  o.max_rotation_std = kMaxMotionSigmaRotation;
+  return o;
+}
+
 void Slam::close_loops(const DataStep& data) {
   const AssociationConfig& a = config_.association;
   if (path_distance_ - last_loop_attempt_path_ < 0.1 * a.loop_local_path) return;
@@ -163,11 +189,7 @@ void Slam::close_loops(const DataStep& data) {
   }
   if (static_cast<int>(local_idx.size()) < a.loop_min_matches || old_idx.empty()) return;
   // Nothing new in the local map since the last search: same answer.
-  // (kept below 2^50 so that a checkpoint stores it exactly as a double)
-  constexpr std::int64_t kSignatureModulus = std::int64_t{1} << 50;
-  std::int64_t signature = static_cast<std::int64_t>(local_idx.size());
-  for (int i : local_idx)
-    signature = (signature * 1009 + features_[static_cast<std::size_t>(i)].id) % kSignatureModulus;
+  const std::int64_t signature = local_map_signature(local_idx);
   if (signature == last_loop_local_signature_) return;
   last_loop_local_signature_ = signature;
   last_loop_attempt_path_ = path_distance_;
@@ -177,7 +199,7 @@ void Slam::close_loops(const DataStep& data) {
   const auto [sigma_xy, sigma_theta] = planar_sigmas(checked_marginal(robot_idx_), dofs_);
   const Eigen::Vector2d here = x_r_.head<2>();
   const double unanchored = path_distance_ - last_anchor_path_;
-  MapMatchOptions o;
+  MapMatchOptions o = map_match_options();
   o.max_translation = std::min(kMaxWindowTranslation, 3.0 * sigma_xy + a.loop_drift_per_metre * unanchored);
   o.max_rotation = std::min(kMaxWindowRotation, 3.0 * sigma_theta + a.loop_drift_deg_per_metre * std::numbers::pi /
                                                                         180.0 * unanchored);
@@ -187,23 +209,10 @@ void Slam::close_loops(const DataStep& data) {
     if (planar_distance(*features_[static_cast<std::size_t>(i)].feature, here) <= reach) nearby.push_back(i);
   if (nearby.empty()) return;
   ++stats_.loop_attempts;
-  o.min_matches = a.loop_min_matches;
-  o.ambiguity_ratio = a.loop_ambiguity_ratio;
-  o.probability = a.gate_probability;
-  o.max_translation_std = kMaxMotionSigmaTranslation;
-  o.max_rotation_std = kMaxMotionSigmaRotation;
 
-  const auto shape = [&](int i) {
-    const MapFeature& mf = features_[static_cast<std::size_t>(i)];
-    FeatureShape s = feature_shape(mf);
-    s.feature = i;
-    const Eigen::MatrixXd Bt = mf.feature->B_dual();  // eq. 11: δx_f = B̃ δx_p
-    s.cov = Bt * checked_marginal(mf.state_idx) * Bt.transpose();
-    return s;
-  };
   std::vector<FeatureShape> local, old;
-  for (int i : local_idx) local.push_back(shape(i));
-  for (int i : nearby) old.push_back(shape(i));
+  for (int i : local_idx) local.push_back(estimated_shape(i));
+  for (int i : nearby) old.push_back(estimated_shape(i));
   const MapMatch match = match_local_map(local, old, here, o);
   // Whether placement h agrees with the waiting one p: the robot's position
   // and heading under both within 3σ of their difference (plus the local

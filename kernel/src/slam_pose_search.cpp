@@ -46,11 +46,6 @@ namespace mspace::kernel {
 
 namespace {
 
-/// The placement must fix the robot at least this well (1σ) to be taken —
-/// the bound loop closing uses for a closure.
-constexpr double kMaxPlacementSigmaTranslation = 0.3;  // m
-constexpr double kMaxPlacementSigmaRotation = 0.035;   // rad (2°)
-
 /// The category of a search's answer, for the log: a line at info level when
 /// it changes, at debug level otherwise.
 std::string category(const std::string& reason) { return reason.substr(0, reason.find(':')); }
@@ -70,8 +65,7 @@ void Slam::search_pose() {
     if (mf.last_seen_path >= path_distance_ - 2.0 * a.loop_local_path) local_idx.push_back(static_cast<int>(i));
   }
   if (static_cast<int>(local_idx.size()) < a.loop_min_matches) return;
-  std::int64_t signature = static_cast<std::int64_t>(local_idx.size());
-  for (int i : local_idx) signature = (signature * 1009 + features_[static_cast<std::size_t>(i)].id) % (1LL << 50);
+  const std::int64_t signature = local_map_signature(local_idx);
   if (signature == s.last_signature) return;  // nothing new to search with
   s.last_signature = signature;
   s.last_search_path = path_distance_;
@@ -81,28 +75,14 @@ void Slam::search_pose() {
     for (std::size_t i = 0; i < s.map_features.size(); ++i) {
       const MapFeature& mf = s.map_features[i];
       if (mf.feature->mspace_dim() == 0) continue;
-      FeatureShape shape = feature_shape(mf);
+      FeatureShape shape = feature_shape(mf, s.considered->covariance(mf.state_idx, P_rr));
       shape.feature = static_cast<int>(i);
-      const Eigen::MatrixXd Bt = mf.feature->B_dual();  // eq. 11: δx_f = B̃ δx_p
-      shape.cov = Bt * s.considered->covariance(mf.state_idx, P_rr) * Bt.transpose();
       s.map_shapes.push_back(std::move(shape));
     }
   }
   std::vector<FeatureShape> local;
-  for (int i : local_idx) {
-    const MapFeature& mf = features_[static_cast<std::size_t>(i)];
-    FeatureShape shape = feature_shape(mf);
-    shape.feature = i;
-    const Eigen::MatrixXd Bt = mf.feature->B_dual();
-    shape.cov = Bt * checked_marginal(mf.state_idx) * Bt.transpose();
-    local.push_back(std::move(shape));
-  }
-  MapMatchOptions o;
-  o.min_matches = a.loop_min_matches;
-  o.ambiguity_ratio = a.loop_ambiguity_ratio;
-  o.probability = a.gate_probability;
-  o.max_translation_std = kMaxPlacementSigmaTranslation;
-  o.max_rotation_std = kMaxPlacementSigmaRotation;
+  for (int i : local_idx) local.push_back(estimated_shape(i));
+  const MapMatchOptions o = map_match_options();  // its window is set by locate_local_map
   const Eigen::Vector2d here = x_r_.head<2>();
   const MapMatch match = locate_local_map(local, s.map_shapes, here, o);
   MapSessionReport& report = *map_session_;
