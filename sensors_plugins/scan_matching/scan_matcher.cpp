@@ -20,8 +20,6 @@ Eigen::Matrix2d rotation(double a) {
   return R;
 }
 
-double wrap(double a) { return std::remainder(a, kTwoPi); }
-
 /// Unit normal of the total-least-squares line through `pts` and the RMS
 /// distance of the points from it.
 std::pair<Eigen::Vector2d, double> fit_line(const std::vector<Eigen::Vector2d>& pts) {
@@ -161,38 +159,50 @@ ReferenceScan::ReferenceScan(const ScanPoints& points, const MatchOptions& optio
     return bearing[static_cast<std::size_t>(fits[static_cast<std::size_t>(a)].index)] <
            bearing[static_cast<std::size_t>(fits[static_cast<std::size_t>(b)].index)];
   });
+  std::vector<double> usable_bearings;
   for (int k : order) {
     const Fit& f = fits[static_cast<std::size_t>(k)];
     const auto& p = points[static_cast<std::size_t>(f.index)];
     points_.push_back(p);
+    ranges_.push_back(p.norm());
     normals_.push_back(f.normal);
-    bearings_.push_back(bearing[static_cast<std::size_t>(f.index)]);
+    usable_bearings.push_back(bearing[static_cast<std::size_t>(f.index)]);
   }
+  bearings_ = BearingIndex(std::move(usable_bearings));
   if (n > 0) {
     min_bearing_ = *std::min_element(bearing.begin(), bearing.end());
     max_bearing_ = *std::max_element(bearing.begin(), bearing.end());
   }
   full_circle_ = max_bearing_ - min_bearing_ > kTwoPi - 3.0 * spacing_;
-  beams_.reserve(static_cast<std::size_t>(n));
+  // Every beam by bearing (ties by range), for the free-space check.
+  std::vector<std::pair<double, double>> beams;
+  beams.reserve(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i)
-    beams_.emplace_back(bearing[static_cast<std::size_t>(i)], points[static_cast<std::size_t>(i)].norm());
-  std::sort(beams_.begin(), beams_.end());
+    beams.emplace_back(bearing[static_cast<std::size_t>(i)], points[static_cast<std::size_t>(i)].norm());
+  std::sort(beams.begin(), beams.end());
+  std::vector<double> beam_bearings;
+  beam_bearings.reserve(beams.size());
+  beam_ranges_.reserve(beams.size());
+  for (const auto& [b, range] : beams) {
+    beam_bearings.push_back(b);
+    beam_ranges_.push_back(range);
+  }
+  beam_bearings_ = BearingIndex(std::move(beam_bearings));
 }
 
-bool ReferenceScan::sees_through(const Eigen::Vector2d& q, double margin) const {
-  if (beams_.empty()) return false;
-  const double b = std::atan2(q.y(), q.x());
+bool ReferenceScan::sees_through(const Eigen::Vector2d& q, const Bearing& b, double margin) const {
+  if (beam_bearings_.empty()) return false;
   const double r = q.norm();
-  const auto at = std::lower_bound(beams_.begin(), beams_.end(), std::make_pair(b, -1.0)) - beams_.begin();
-  const auto count = static_cast<long>(beams_.size());
+  const auto at = static_cast<long>(beam_bearings_.first_not_below(b));
+  const auto count = static_cast<long>(beam_bearings_.size());
   bool any = false;
   // A beam beside a near object's edge ends on the wall behind it: every beam
   // around q's bearing must have ended beyond q, not just the nearest.
   for (long k = at - 2; k <= at + 1; ++k) {
     if (k < 0 || k >= count) continue;
-    const auto& [bearing, range] = beams_[static_cast<std::size_t>(k)];
-    if (std::abs(wrap(bearing - b)) > 1.5 * spacing_) continue;
-    if (range <= r + margin) return false;
+    const auto beam = static_cast<std::size_t>(k);
+    if (b.farther_than(beam_bearings_[beam], 1.5 * spacing_)) continue;
+    if (beam_ranges_[beam] <= r + margin) return false;
     any = true;
   }
   return any;
@@ -202,20 +212,22 @@ double ReferenceScan::beam_gap(double range) const {
   return std::max(options_.normal_radius, options_.gap_beams * range * spacing_);
 }
 
-bool ReferenceScan::in_view(const Eigen::Vector2d& q) const {
+bool ReferenceScan::in_view(const Eigen::Vector2d& q, const Bearing& b) const {
   if (q.squaredNorm() > max_range_ * max_range_) return false;
   if (full_circle_) return true;
-  const double b = std::atan2(q.y(), q.x());
-  return b >= min_bearing_ - 0.5 * spacing_ && b <= max_bearing_ + 0.5 * spacing_;
+  return b.at_least(min_bearing_ - 0.5 * spacing_) && b.at_most(max_bearing_ + 0.5 * spacing_);
 }
 
 int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q) const {
+  return nearest_by_bearing(q, Bearing(q.x(), q.y()));
+}
+
+int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q, const Bearing& b) const {
   const int n = static_cast<int>(points_.size());
   if (n == 0) return -1;
   // Projective association: the reference beams around q's bearing are the
   // ones that could have seen q; the nearest of them is its partner.
-  const double b = std::atan2(q.y(), q.x());
-  const int at = static_cast<int>(std::lower_bound(bearings_.begin(), bearings_.end(), b) - bearings_.begin());
+  const int at = static_cast<int>(bearings_.first_not_below(b));
   const int w = std::max(1, options_.association_window);
   int best = -1;
   double best_d2 = std::numeric_limits<double>::infinity();
@@ -273,16 +285,20 @@ int ReferenceScan::drop_moving(const ScanPoints& older, const Eigen::Vector3d& o
   // wrong, or the scene changed wholesale; then nothing is known to move.
   if (dropped > options_.moving_max_fraction * static_cast<double>(points_.size())) return 0;
   std::size_t j = 0;
+  std::vector<double> kept_bearings;
+  kept_bearings.reserve(points_.size());
   for (std::size_t i = 0; i < points_.size(); ++i) {
     if (!keep[i]) continue;
     points_[j] = points_[i];
+    ranges_[j] = ranges_[i];
     normals_[j] = normals_[i];
-    bearings_[j] = bearings_[i];
+    kept_bearings.push_back(bearings_[i]);
     ++j;
   }
   points_.resize(j);
+  ranges_.resize(j);
   normals_.resize(j);
-  bearings_.resize(j);
+  bearings_ = BearingIndex(std::move(kept_bearings));
   return dropped;
 }
 
@@ -306,7 +322,7 @@ Eigen::Vector3d ReferenceScan::heading_search(const ScanPoints& current, const E
       if (j < 0) continue;
       const Eigen::Vector2d& p = points_[static_cast<std::size_t>(j)];
       const double d = (moved - p).norm();
-      const double radius = std::max(R, p.norm() * spacing_);
+      const double radius = std::max(R, ranges_[static_cast<std::size_t>(j)] * spacing_);
       if (d >= radius) continue;
       s += 1.0 - (d / radius) * (d / radius);
     }
@@ -478,6 +494,31 @@ struct ReferenceScan::Local {
   Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
 };
 
+namespace {
+
+/// A current point moved into one reference scan's frame, and its bearing there.
+struct PlacedPoint {
+  Eigen::Vector2d local;
+  Bearing bearing;
+};
+
+/// The current points at the pose (R, t) in the matching frame, moved into
+/// the frame of `layer` (at layer.pose in the matching frame):
+/// P⁻¹ (R q + t) = R_Pᵀ (R q + t − t_P), each with its bearing there (shared
+/// by the free-space check, the overlap count and the pairing).
+void place_in(const PlacedReference& layer, const ScanPoints& current, const Eigen::Matrix2d& R,
+              const Eigen::Vector2d& t, std::vector<PlacedPoint>& out) {
+  const Eigen::Matrix2d Rpt = rotation(layer.pose[2]).transpose();
+  out.clear();
+  for (const Eigen::Vector2d& q : current) {
+    const Eigen::Vector2d moved = R * q + t;
+    const Eigen::Vector2d local = Rpt * (moved - layer.pose.head<2>());
+    out.push_back({local, Bearing(local.x(), local.y())});
+  }
+}
+
+}  // namespace
+
 ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::Vector3d& start,
                                         const Eigen::Vector3d& seed, const std::vector<PlacedReference>& older,
                                         double first_distance) const {
@@ -499,45 +540,45 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
   const double free_margin =
       options_.free_space_margin > 0.0 ? std::max(options_.free_space_margin, 10.0 * noise_) : 0.0;
   std::vector<char> moving(current.size(), 0);
-  std::vector<Eigen::Matrix2d> layer_rotations;  // R_Pᵀ of each layer
-  for (const PlacedReference& layer : layers) layer_rotations.push_back(rotation(layer.pose[2]).transpose());
-  auto mark_moving = [&](const Eigen::Vector3d& pose) {
-    const Eigen::Matrix2d Rm = rotation(pose[2]);
+  // The current points placed in each layer at the estimate of this
+  // iteration (buffers kept across iterations).
+  std::vector<std::vector<PlacedPoint>> placed(layers.size());
+  auto mark_moving = [&] {
     for (std::size_t i = 0; i < current.size(); ++i) {
-      const Eigen::Vector2d q = Rm * current[i] + pose.head<2>();
       moving[i] = 0;
       for (std::size_t l = 0; l < layers.size() && !moving[i]; ++l)
-        moving[i] = layers[l].scan->sees_through(layer_rotations[l] * (q - layers[l].pose.head<2>()), free_margin);
+        moving[i] = layers[l].scan->sees_through(placed[l][i].local, placed[l][i].bearing, free_margin);
     }
   };
   for (int it = 0; it < options_.max_iterations; ++it) {
-    if (free_margin > 0.0 && it % 5 == 0) mark_moving(T);
+    const Eigen::Matrix2d R = rotation(T[2]);
+    for (std::size_t l = 0; l < layers.size(); ++l) place_in(layers[l], current, R, T.head<2>(), placed[l]);
+    if (free_margin > 0.0 && it % 5 == 0) mark_moving();
     const double max_distance =
         correspondence_distance(std::max(first_distance > 0.0 ? first_distance : options_.max_correspondence,
                                          min_correspondence_),
                                 min_correspondence_,
                                 options_.max_iterations, it);
-    const Eigen::Matrix2d R = rotation(T[2]);
     const Eigen::Matrix2d dR = rotation(T[2] + 0.5 * std::numbers::pi);  // ∂R/∂θ
     Eigen::Matrix3d H = Eigen::Matrix3d::Zero(), H_own = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     double weighted_r2 = 0.0, weight_sum = 0.0;
     int pairs = 0, overlap = 0;
-    for (const PlacedReference& layer : layers) {
+    for (std::size_t l = 0; l < layers.size(); ++l) {
+      const PlacedReference& layer = layers[l];
       const ReferenceScan& ref = *layer.scan;
       const double layer_weight = layer.scan == this ? 1.0 : options_.local_map_weight;
       // A point q' in this frame is P⁻¹ q' = R_Pᵀ (q' − t_P) in the layer's
-      // own frame, where it is paired by bearing (that scan's beams could
-      // have seen it). Its partner's normal n there is R_P n here.
+      // own frame (place_in), where it is paired by bearing (that scan's beams
+      // could have seen it). Its partner's normal n there is R_P n here.
       const Eigen::Matrix2d Rp = rotation(layer.pose[2]);
-      const Eigen::Matrix2d Rpt = Rp.transpose();
       for (std::size_t i = 0; i < current.size(); ++i) {
         const Eigen::Vector2d& q = current[i];
-        const Eigen::Vector2d moved = R * q + T.head<2>();
-        const Eigen::Vector2d local = Rpt * (moved - layer.pose.head<2>());
-        if (ref.in_view(local)) ++overlap;
+        const Eigen::Vector2d& local = placed[l][i].local;
+        const Bearing& bearing = placed[l][i].bearing;
+        if (ref.in_view(local, bearing)) ++overlap;
         if (moving[i]) continue;
-        const int j = ref.nearest_by_bearing(local);
+        const int j = ref.nearest_by_bearing(local, bearing);
         if (j < 0) continue;
         const Eigen::Vector2d& p = ref.points_[static_cast<std::size_t>(j)];
         const Eigen::Vector2d d = local - p;
@@ -547,7 +588,8 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
         // and the partner within that distance too or, where the beams are
         // sparser (far away), within gate_beams beam spacings at its range: the
         // nearest beam on the same wall can be that far along it.
-        const double gate = std::max(max_distance, options_.gate_beams * p.norm() * ref.spacing_);
+        const double gate =
+            std::max(max_distance, options_.gate_beams * ref.ranges_[static_cast<std::size_t>(j)] * ref.spacing_);
         if (std::abs(r) > max_distance || d.squaredNorm() > gate * gate) continue;
         const double w = layer_weight * (std::abs(r) <= huber_ ? 1.0 : huber_ / std::abs(r));
         // ∂r/∂(dx, dy, dθ) = (n'ᵀ, n'ᵀ ∂R/∂θ q) with n' = R_P n (eq. of the
