@@ -9,6 +9,9 @@
 // 0.15 m: the settings README.md gives for Intel) and add the scan to it,
 // increments taken in driving order. Run e.g.
 //   ./build/bin/bench_scan_matching --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+// Measured 2026-11-28 07:12 UTC, load average 6.2 on 2 cores, CPU time, median of 5: previous scan 1.09 ms
+// (office) / 0.98 ms (hall); local map 2.04 / 1.94 ms (489 / 516 increments/s; 4.17 / 3.87 ms before the
+// bearings of bearings.hpp, one per point and reference per iteration); far seed 6.5 ms; 181 beams 0.46 ms.
 #include <benchmark/benchmark.h>
 
 #include <random>
