@@ -104,12 +104,16 @@ void CekfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) 
   paa_.topLeftCorner(k_, k_).triangularView<Eigen::Lower>() = J_rr * C_rr * J_rr.transpose() + Q;
 
   // eq. 27 inside A: the lower triangle holds C_{A∖r, r}, which becomes C_{A∖r, r} J_rrᵀ.
+  // (k columns: coefficient-wise products, the blocked product's set-up
+  // cost more than its arithmetic at every step.)
   auto C_ar = paa_.block(k_, 0, na_ - k_, k_);
-  C_ar = C_ar * J_rr.transpose();
+  const Eigen::MatrixXd C_ar_new = C_ar.lazyProduct(J_rr.transpose());
+  C_ar = C_ar_new;
 
   // eq. 27 against B: C_rB = Φ_r G becomes J_rr Φ_r G, so Φ_r ← J_rr Φ_r.
   auto phi_r = phi_.topLeftCorner(k_, n0_);
-  phi_r = J_rr * phi_r;
+  const Eigen::MatrixXd phi_r_new = J_rr.lazyProduct(phi_r);
+  phi_r = phi_r_new;
 
   // The unobservable directions move with the robot block: U_r ← J_rr U_r.
   if (constrained_) U_.predict(J_rr);
@@ -137,7 +141,8 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
 
   activate(s.union_idx);
   const std::vector<int> pos = positions(s.union_idx);
-  Eigen::MatrixXd W = active_columns(pos) * s.J.transpose();  // P_AA Hᵀ
+  Eigen::MatrixXd W = Eigen::MatrixXd::Zero(na_, s.J.rows());  // P_AA Hᵀ
+  add_product(W, 1.0, active_columns(pos), s.J);
 
   // eq. 29: S = H P_II Hᵀ + C_η.
   const Eigen::MatrixXd S = s.J * W(pos, Eigen::all) + s.C_eta;
@@ -146,7 +151,8 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
     throw std::runtime_error("cekf update: S (" + support::size_text(S.rows(), S.cols()) +
                              ") is not positive definite");
   }
-  Eigen::MatrixXd V = (s.J * phi_(pos, Eigen::seqN(0, n0_))).transpose();
+  Eigen::MatrixXd V = Eigen::MatrixXd::Zero(n0_, s.J.rows());  // (H Φ)ᵀ = Φ_Iᵀ Jᵀ
+  add_product(V, 1.0, phi_rows_transposed(pos), s.J);
   llt.matrixU().solveInPlace<Eigen::OnTheRight>(W);
   llt.matrixU().solveInPlace<Eigen::OnTheRight>(V);
   const Eigen::VectorXd whitened = llt.matrixL().solve(s.eta);
@@ -162,8 +168,8 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
 
   // eq. 32 on the compressed representation.
   add_product(paa_.topLeftCorner(na_, na_), -1.0, W, W, ProductPart::lower);
-  phi_.topLeftCorner(na_, n0_).noalias() -= W * V.transpose();
-  psi_.topLeftCorner(n0_, n0_).selfadjointView<Eigen::Lower>().rankUpdate(V, 1.0);
+  add_product(phi_.topLeftCorner(na_, n0_), -1.0, W, V);
+  add_product(psi_.topLeftCorner(n0_, n0_), 1.0, V, V, ProductPart::lower);
   mirror_psi();
   refresh_memo(V);
 
@@ -449,12 +455,18 @@ void CekfFilter::refresh_memo(const Eigen::MatrixXd& V) {
   std::erase_if(memo_, [](const auto& entry) { return !entry.second.asked; });
   std::vector<int> all_slots;
   for (const auto& [slots, entry] : memo_) all_slots.insert(all_slots.end(), slots.begin(), slots.end());
-  const Eigen::MatrixXd VtG = V.transpose() * g_(Eigen::seqN(0, n0_), all_slots);
+  // Vᵀ G_J for all of them at once (one blocked product of copied columns:
+  // the indexed view made Eigen evaluate it coefficient by coefficient).
+  const auto cols = static_cast<Index>(all_slots.size());
+  Eigen::MatrixXd gt(cols, n0_);  // G_Jᵀ
+  for (Index c = 0; c < cols; ++c) gt.row(c) = g_.col(all_slots[static_cast<std::size_t>(c)]).head(n0_).transpose();
+  Eigen::MatrixXd VtG = Eigen::MatrixXd::Zero(V.cols(), cols);
+  add_product(VtG, 1.0, V.transpose(), gt);
   Index column = 0;
   for (auto& [slots, entry] : memo_) {
     const auto size = static_cast<Index>(slots.size());
     const auto block = VtG.middleCols(column, size);
-    entry.quadratic.noalias() += block.transpose() * block;
+    entry.quadratic.noalias() += block.transpose().lazyProduct(block);  // a few entries: no blocked product
     entry.asked = false;
     column += size;
   }
@@ -562,10 +574,29 @@ void CekfFilter::write_active_rows_into_store() {
   if (n0_ > 0) {
     Eigen::MatrixXd pab = Eigen::MatrixXd::Zero(na_, ns_);
     add_product(pab, 1.0, phi_.topLeftCorner(na_, n0_), g_.topLeftCorner(n0_, ns_).transpose());
+    // Row a of P_AB goes to column s = slot(a) of the lower triangle from
+    // the diagonal down (contiguous), and left of it to row s, whose entries
+    // are a column of the store apart. Those are written column by column
+    // with the active rows in slot order: active rows are mostly recent
+    // features with nearby slots, so the entries of one column that go out
+    // together share cache lines (row by row, each entry was a cache line of
+    // its own, evicted before the next active row came back to it).
+    std::vector<int> by_slot(static_cast<std::size_t>(na_));
+    std::iota(by_slot.begin(), by_slot.end(), 0);
+    std::sort(by_slot.begin(), by_slot.end(), [&](int a, int b) {
+      return slot_of[static_cast<std::size_t>(a)] < slot_of[static_cast<std::size_t>(b)];
+    });
     for (int a = 0; a < na_; ++a) {
       const int s = slot_of[static_cast<std::size_t>(a)];
       p0_.col(s).segment(s, ns_ - s) = pab.row(a).segment(s, ns_ - s).transpose();
-      p0_.row(s).head(s) = pab.row(a).head(s);
+    }
+    std::size_t first = 0;  // by_slot[first..]: the active rows with slot > t
+    for (int t = 0; t < ns_; ++t) {
+      while (first < by_slot.size() && slot_of[static_cast<std::size_t>(by_slot[first])] <= t) ++first;
+      for (std::size_t i = first; i < by_slot.size(); ++i) {
+        const int a = by_slot[i];
+        p0_(slot_of[static_cast<std::size_t>(a)], t) = pab(a, t);
+      }
     }
   }
   for (int b = 0; b < na_; ++b) {
@@ -781,6 +812,12 @@ Eigen::MatrixXd CekfFilter::active_columns(const std::vector<int>& pos) const {
     column.head(a) = paa_.row(a).head(a).transpose();
     column.tail(na_ - a) = paa_.col(a).segment(a, na_ - a);
   }
+  return out;
+}
+
+Eigen::MatrixXd CekfFilter::phi_rows_transposed(const std::vector<int>& pos) const {
+  Eigen::MatrixXd out(n0_, static_cast<Index>(pos.size()));
+  for (std::size_t c = 0; c < pos.size(); ++c) out.col(static_cast<Index>(c)) = phi_.row(pos[c]).head(n0_).transpose();
   return out;
 }
 

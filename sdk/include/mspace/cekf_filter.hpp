@@ -162,6 +162,8 @@ class CekfFilter final : public Estimator {
   double p0(int s, int t) const { return s >= t ? p0_(s, t) : p0_(t, s); }
   /// P_AA[:, pos] (n_A × pos.size()).
   Eigen::MatrixXd active_columns(const std::vector<int>& pos) const;
+  /// Φ_Iᵀ for the active positions pos (n0 × pos.size()).
+  Eigen::MatrixXd phi_rows_transposed(const std::vector<int>& pos) const;
   /// Writes column s of the P⁰ store (all ns_ slots) into `out`.
   void p0_column(int s, Eigen::Ref<Eigen::VectorXd, 0, Eigen::InnerStride<>> out) const;
   /// The rows or columns of a marginal or cross request, split by set:
