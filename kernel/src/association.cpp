@@ -24,7 +24,10 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 /// Throws a PluginError naming the instance when a plugin hands back NaN/inf.
 void require_finite(const Eigen::MatrixXd& m, const char* what, const std::string& instance,
                     const LoadedPlugin& lib) {
-  if (m.allFinite()) return;
+  // A plain loop: called three times for every (feature, measurement) pair on
+  // matrices of a few entries, where Eigen's allFinite() costs several times more.
+  const double* data = m.data();
+  if (std::all_of(data, data + m.size(), [](double v) { return std::isfinite(v); })) return;
   std::ostringstream os;
   os << instance << " (plugin '" << lib.descriptor->name << "', library '" << lib.path.string()
      << "'): " << what << " contains NaN or infinity";
