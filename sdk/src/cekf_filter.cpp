@@ -243,45 +243,94 @@ Eigen::MatrixXd CekfFilter::active_block(const std::vector<int>& rows, const std
 // row a and G_j of a passive row j, P_aj = Φ_a G_j and P_ij = P⁰_ij − G_iᵀ Ψ G_j.
 Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std::vector<int>& cols,
                                         bool symmetric) const {
-  // The kernel's gating calls this (symmetric, the robot and one passive
-  // feature) for every feature in range at every reading: the symmetric case
-  // copies nothing twice.
+  if (symmetric) {
+    // The kernel's gating calls this (the robot and one passive feature) for
+    // every feature in range at every reading, so it allocates nothing but its
+    // result: the per-row bookkeeping lives in buffers kept between calls, the
+    // active rows' Φ is copied once (its rows are a column of the storage apart),
+    // and each P_aj = Φ_a G_j is one dot product with G's column of slot j read
+    // in place; P⁰_JJ and G_Jᵀ Ψ G_J come from the memo.
+    const std::vector<int>& idx = rows;
+    const auto n = static_cast<Index>(idx.size());
+    thread_local std::vector<int> position, passive_slots;  // per output row: active position (−1: passive)
+    thread_local std::vector<Index> passive_index;         // … its place among the passive rows
+    thread_local std::vector<double> phi_active;           // Φ_a of the active rows, n0 numbers each
+    position.resize(static_cast<std::size_t>(n));
+    passive_index.resize(static_cast<std::size_t>(n));
+    passive_slots.clear();
+    Index active_rows = 0;
+    for (Index i = 0; i < n; ++i) {
+      const auto row = static_cast<std::size_t>(idx[static_cast<std::size_t>(i)]);
+      position[static_cast<std::size_t>(i)] = active_[row];
+      if (active_[row] >= 0) {
+        passive_index[static_cast<std::size_t>(i)] = active_rows++;  // here: its place among the active rows
+      } else {
+        passive_index[static_cast<std::size_t>(i)] = static_cast<Index>(passive_slots.size());
+        passive_slots.push_back(slot_[row]);
+      }
+    }
+    Eigen::MatrixXd out(n, n);
+    phi_active.resize(static_cast<std::size_t>(active_rows * n0_));
+    for (Index i = 0; i < n; ++i) {
+      const int a = position[static_cast<std::size_t>(i)];
+      if (a < 0) continue;
+      double* to = phi_active.data() + passive_index[static_cast<std::size_t>(i)] * n0_;
+      for (Index b = 0; b < n0_; ++b) to[b] = phi_(a, b);
+    }
+    const MemoEntry* memo = nullptr;
+    if (const auto found = memo_.find(passive_slots); found != memo_.end()) {
+      found->second.asked = true;
+      memo = &found->second;
+    } else {
+      memo = &passive_memo(passive_slots, g_(Eigen::seqN(0, n0_), passive_slots));
+    }
+    for (Index j = 0; j < n; ++j) {
+      const int b = position[static_cast<std::size_t>(j)];
+      const Index pj = passive_index[static_cast<std::size_t>(j)];
+      for (Index i = j; i < n; ++i) {
+        const int a = position[static_cast<std::size_t>(i)];
+        const Index pi = passive_index[static_cast<std::size_t>(i)];
+        double value = 0.0;
+        if (a >= 0 && b >= 0) {
+          value = paa(a, b);
+        } else if (a < 0 && b < 0) {
+          value = memo->p0_block(pi, pj) - memo->quadratic(pi, pj);
+        } else {  // one active row (its Φ), one passive (its column of G)
+          const Index active_place = a >= 0 ? pi : pj;
+          const int slot = passive_slots[static_cast<std::size_t>(a >= 0 ? pj : pi)];
+          value = Eigen::Map<const Eigen::VectorXd>(phi_active.data() + active_place * n0_, n0_)
+                      .dot(g_.col(slot).head(n0_));
+        }
+        out(i, j) = value;
+        out(j, i) = value;
+      }
+    }
+    return out;
+  }
+  // The general case (cross(): rows and columns differ).
   Eigen::MatrixXd out(static_cast<Index>(rows.size()), static_cast<Index>(cols.size()));
   const Split r = split(rows);
-  const Split c = symmetric ? Split() : split(cols);
-  const Split& cs = symmetric ? r : c;
+  const Split c = split(cols);
   const auto basis = Eigen::seqN(0, n0_);
   const Eigen::MatrixXd g_rows = g_(basis, r.passive_slot);  // G_i, n0 × |rows in B|
-  const Eigen::MatrixXd g_other =
-      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(g_(basis, c.passive_slot));
-  const Eigen::MatrixXd& g_cols = symmetric ? g_rows : g_other;
+  const Eigen::MatrixXd g_cols = g_(basis, c.passive_slot);
   // A handful of rows and columns: coefficient-wise products of copied rows
   // beat blocked products.
-  const Eigen::MatrixXd phi_rows = phi_(r.active_pos, basis);
-  const Eigen::MatrixXd ab = phi_rows.lazyProduct(g_cols);
-  const Eigen::MatrixXd ba_other =
-      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(Eigen::MatrixXd(phi_(c.active_pos, basis)).lazyProduct(g_rows));
-  const Eigen::MatrixXd& ba = symmetric ? ab : ba_other;
-  const Eigen::MatrixXd bb_other =
-      symmetric ? Eigen::MatrixXd() : Eigen::MatrixXd(g_rows.transpose() * psi_times(g_cols));
-  // Symmetric: P⁰_JJ and G_Jᵀ Ψ G_J from the memo (P⁰ is far too large for
-  // the cache: its entries, read afresh for every query, cost more than the rest).
-  const MemoEntry* memo = symmetric ? &passive_memo(r.passive_slot, g_rows) : nullptr;
-  const Eigen::MatrixXd& bb = symmetric ? memo->quadratic : bb_other;
+  const Eigen::MatrixXd ab = Eigen::MatrixXd(phi_(r.active_pos, basis)).lazyProduct(g_cols);
+  const Eigen::MatrixXd ba = Eigen::MatrixXd(phi_(c.active_pos, basis)).lazyProduct(g_rows);
+  const Eigen::MatrixXd bb = g_rows.transpose() * psi_times(g_cols);
   for (std::size_t i = 0; i < r.active_at.size(); ++i) {
-    for (std::size_t j = 0; j < cs.active_at.size(); ++j)
-      out(r.active_at[i], cs.active_at[j]) = paa(r.active_pos[i], cs.active_pos[j]);
-    for (std::size_t j = 0; j < cs.passive_at.size(); ++j)
-      out(r.active_at[i], cs.passive_at[j]) = ab(static_cast<Index>(i), static_cast<Index>(j));
+    for (std::size_t j = 0; j < c.active_at.size(); ++j)
+      out(r.active_at[i], c.active_at[j]) = paa(r.active_pos[i], c.active_pos[j]);
+    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
+      out(r.active_at[i], c.passive_at[j]) = ab(static_cast<Index>(i), static_cast<Index>(j));
   }
   for (std::size_t i = 0; i < r.passive_at.size(); ++i) {
-    for (std::size_t j = 0; j < cs.active_at.size(); ++j)
-      out(r.passive_at[i], cs.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
-    for (std::size_t j = 0; j < cs.passive_at.size(); ++j)
-      out(r.passive_at[i], cs.passive_at[j]) =
-          (memo != nullptr ? memo->p0_block(static_cast<Index>(i), static_cast<Index>(j))
-                           : p0(r.passive_slot[i], cs.passive_slot[j])) -
-          bb(static_cast<Index>(i), static_cast<Index>(j));
+    for (std::size_t j = 0; j < c.active_at.size(); ++j)
+      out(r.passive_at[i], c.active_at[j]) = ba(static_cast<Index>(j), static_cast<Index>(i));
+    for (std::size_t j = 0; j < c.passive_at.size(); ++j)
+      out(r.passive_at[i], c.passive_at[j]) =
+          p0(r.passive_slot[i], c.passive_slot[j]) - bb(static_cast<Index>(i), static_cast<Index>(j));
   }
   return out;
 }
