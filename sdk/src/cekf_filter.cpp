@@ -104,16 +104,27 @@ void CekfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) 
   paa_.topLeftCorner(k_, k_).triangularView<Eigen::Lower>() = J_rr * C_rr * J_rr.transpose() + Q;
 
   // eq. 27 inside A: the lower triangle holds C_{A∖r, r}, which becomes C_{A∖r, r} J_rrᵀ.
-  // (k columns: coefficient-wise products, the blocked product's set-up
-  // cost more than its arithmetic at every step.)
-  auto C_ar = paa_.block(k_, 0, na_ - k_, k_);
-  const Eigen::MatrixXd C_ar_new = C_ar.lazyProduct(J_rr.transpose());
-  C_ar = C_ar_new;
+  // Both products below have k columns or rows: plain loops (column c of
+  // the result is Σ_l J_rr(c, l) times column l), because Eigen's products
+  // of these shapes cost several times their arithmetic at every step.
+  const Eigen::MatrixXd C_ar = paa_.block(k_, 0, na_ - k_, k_);
+  for (Index c = 0; c < k_; ++c) {
+    auto out = paa_.col(c).segment(k_, na_ - k_);
+    out = J_rr(c, 0) * C_ar.col(0);
+    for (Index l = 1; l < k_; ++l) out += J_rr(c, l) * C_ar.col(l);
+  }
 
-  // eq. 27 against B: C_rB = Φ_r G becomes J_rr Φ_r G, so Φ_r ← J_rr Φ_r.
-  auto phi_r = phi_.topLeftCorner(k_, n0_);
-  const Eigen::MatrixXd phi_r_new = J_rr.lazyProduct(phi_r);
-  phi_r = phi_r_new;
+  // eq. 27 against B: C_rB = Φ_r G becomes J_rr Φ_r G, so Φ_r ← J_rr Φ_r
+  // (column by column: the k entries of a column of Φ_r are contiguous).
+  Eigen::VectorXd column(k_);
+  for (Index b = 0; b < n0_; ++b) {
+    column = phi_.col(b).head(k_);
+    for (Index c = 0; c < k_; ++c) {
+      double sum = 0.0;
+      for (Index l = 0; l < k_; ++l) sum += J_rr(c, l) * column[l];
+      phi_(c, b) = sum;
+    }
+  }
 
   // The unobservable directions move with the robot block: U_r ← J_rr U_r.
   if (constrained_) U_.predict(J_rr);
