@@ -231,15 +231,17 @@ int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q, const Bearing& b
   const int w = std::max(1, options_.association_window);
   int best = -1;
   double best_d2 = std::numeric_limits<double>::infinity();
-  for (int k = at - w; k < at + w; ++k) {
-    int j = k;
-    if (full_circle_) j = ((k % n) + n) % n;
-    else if (k < 0 || k >= n) continue;
+  auto consider = [&](int j) {
     const double d2 = (points_[static_cast<std::size_t>(j)] - q).squaredNorm();
     if (d2 < best_d2) {
       best_d2 = d2;
       best = j;
     }
+  };
+  if (full_circle_) {
+    for (int k = at - w; k < at + w; ++k) consider(((k % n) + n) % n);
+  } else {
+    for (int j = std::max(0, at - w); j < std::min(n, at + w); ++j) consider(j);
   }
   return best;
 }
@@ -502,17 +504,16 @@ struct PlacedPoint {
   Bearing bearing;
 };
 
-/// The current points at the pose (R, t) in the matching frame, moved into
-/// the frame of `layer` (at layer.pose in the matching frame):
-/// P⁻¹ (R q + t) = R_Pᵀ (R q + t − t_P), each with its bearing there (shared
-/// by the free-space check, the overlap count and the pairing).
-void place_in(const PlacedReference& layer, const ScanPoints& current, const Eigen::Matrix2d& R,
-              const Eigen::Vector2d& t, std::vector<PlacedPoint>& out) {
+/// The current points, moved to the estimate in the matching frame (`moved`:
+/// R q + t), placed in the frame of `layer` (at layer.pose in the matching
+/// frame): P⁻¹ (R q + t) = R_Pᵀ (R q + t − t_P), each with its bearing there
+/// (shared by the free-space check, the overlap count and the pairing).
+void place_in(const PlacedReference& layer, const std::vector<Eigen::Vector2d>& moved,
+              std::vector<PlacedPoint>& out) {
   const Eigen::Matrix2d Rpt = rotation(layer.pose[2]).transpose();
   out.clear();
-  for (const Eigen::Vector2d& q : current) {
-    const Eigen::Vector2d moved = R * q + t;
-    const Eigen::Vector2d local = Rpt * (moved - layer.pose.head<2>());
+  for (const Eigen::Vector2d& m : moved) {
+    const Eigen::Vector2d local = Rpt * (m - layer.pose.head<2>());
     out.push_back({local, Bearing(local.x(), local.y())});
   }
 }
@@ -540,8 +541,10 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
   const double free_margin =
       options_.free_space_margin > 0.0 ? std::max(options_.free_space_margin, 10.0 * noise_) : 0.0;
   std::vector<char> moving(current.size(), 0);
-  // The current points placed in each layer at the estimate of this
-  // iteration (buffers kept across iterations).
+  // Each iteration moves the current points to the estimate once (R q + t,
+  // and ∂R/∂θ q for the Jacobians) and places them in each layer (buffers
+  // kept across iterations).
+  std::vector<Eigen::Vector2d> moved(current.size()), turned(current.size());
   std::vector<std::vector<PlacedPoint>> placed(layers.size());
   auto mark_moving = [&] {
     for (std::size_t i = 0; i < current.size(); ++i) {
@@ -550,20 +553,32 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
         moving[i] = layers[l].scan->sees_through(placed[l][i].local, placed[l][i].bearing, free_margin);
     }
   };
+  // Current points inside some layer's view, counted (once, for the result)
+  // at the placement of the last iteration.
+  auto count_overlap = [&] {
+    int overlap = 0;
+    for (std::size_t l = 0; l < layers.size(); ++l)
+      for (const PlacedPoint& p : placed[l]) overlap += layers[l].scan->in_view(p.local, p.bearing) ? 1 : 0;
+    return overlap;
+  };
   for (int it = 0; it < options_.max_iterations; ++it) {
     const Eigen::Matrix2d R = rotation(T[2]);
-    for (std::size_t l = 0; l < layers.size(); ++l) place_in(layers[l], current, R, T.head<2>(), placed[l]);
+    const Eigen::Matrix2d dR = rotation(T[2] + 0.5 * std::numbers::pi);  // ∂R/∂θ
+    for (std::size_t i = 0; i < current.size(); ++i) {
+      moved[i] = R * current[i] + T.head<2>();
+      turned[i] = dR * current[i];
+    }
+    for (std::size_t l = 0; l < layers.size(); ++l) place_in(layers[l], moved, placed[l]);
     if (free_margin > 0.0 && it % 5 == 0) mark_moving();
     const double max_distance =
         correspondence_distance(std::max(first_distance > 0.0 ? first_distance : options_.max_correspondence,
                                          min_correspondence_),
                                 min_correspondence_,
                                 options_.max_iterations, it);
-    const Eigen::Matrix2d dR = rotation(T[2] + 0.5 * std::numbers::pi);  // ∂R/∂θ
     Eigen::Matrix3d H = Eigen::Matrix3d::Zero(), H_own = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     double weighted_r2 = 0.0, weight_sum = 0.0;
-    int pairs = 0, overlap = 0;
+    int pairs = 0;
     for (std::size_t l = 0; l < layers.size(); ++l) {
       const PlacedReference& layer = layers[l];
       const ReferenceScan& ref = *layer.scan;
@@ -573,12 +588,9 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
       // could have seen it). Its partner's normal n there is R_P n here.
       const Eigen::Matrix2d Rp = rotation(layer.pose[2]);
       for (std::size_t i = 0; i < current.size(); ++i) {
-        const Eigen::Vector2d& q = current[i];
-        const Eigen::Vector2d& local = placed[l][i].local;
-        const Bearing& bearing = placed[l][i].bearing;
-        if (ref.in_view(local, bearing)) ++overlap;
         if (moving[i]) continue;
-        const int j = ref.nearest_by_bearing(local, bearing);
+        const Eigen::Vector2d& local = placed[l][i].local;
+        const int j = ref.nearest_by_bearing(local, placed[l][i].bearing);
         if (j < 0) continue;
         const Eigen::Vector2d& p = ref.points_[static_cast<std::size_t>(j)];
         const Eigen::Vector2d d = local - p;
@@ -595,17 +607,18 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
         // ∂r/∂(dx, dy, dθ) = (n'ᵀ, n'ᵀ ∂R/∂θ q) with n' = R_P n (eq. of the
         // residual n'ᵀ(R q + t − R_P p − t_P)).
         const Eigen::Vector2d n = Rp * n_local;
-        const Eigen::Vector3d J(n.x(), n.y(), n.dot(dR * q));
+        const Eigen::Vector3d J(n.x(), n.y(), n.dot(turned[i]));
         H.noalias() += w * J * J.transpose();
-        if (layer.scan == this) H_own.noalias() += w * J * J.transpose();
+        if (l > 0 && layer.scan == this) H_own.noalias() += w * J * J.transpose();
         g += w * J * r;
         weighted_r2 += w * r * r;
         weight_sum += w;
         ++pairs;
       }
+      // Layer 0 is this scan: H holds exactly its pairs' sum so far.
+      if (l == 0) H_own = H;
     }
     out.pairs = pairs;
-    out.overlap = overlap;
     out.iterations = it + 1;
     out.T = T;
     // The key scans pair the same current points again: their residuals
@@ -614,6 +627,7 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
     out.information = point_weight * H_own;
     if (pairs < std::max(3, options_.min_pairs)) {
       out.rms = std::numeric_limits<double>::infinity();
+      out.overlap = count_overlap();
       return out;
     }
     out.rms = std::sqrt(weighted_r2 / weight_sum);
@@ -629,6 +643,7 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
         std::abs(step[2]) < options_.converged_step)
       break;
   }
+  out.overlap = count_overlap();
   return out;
 }
 
