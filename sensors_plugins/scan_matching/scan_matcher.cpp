@@ -65,6 +65,44 @@ ScanPoints subsample(const ScanPoints& points, int limit) {
   return out;
 }
 
+/// Position of the first of the `count` points (xs[k], ys[k]) nearest to q,
+/// or −1 if none is nearer than infinity (q not finite). The same answer as
+/// scanning them in order for a strictly smaller squared distance.
+int first_nearest(const double* xs, const double* ys, int count, const Eigen::Vector2d& q) {
+  int best = -1;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < count; ++k) {
+    const double dx = xs[k] - q.x(), dy = ys[k] - q.y();
+    const double d2 = dx * dx + dy * dy;
+    if (d2 < best_d2) {
+      best_d2 = d2;
+      best = k;
+    }
+  }
+  return best;
+}
+
+/// The same for a fixed count (a power of two), written so that the compiler
+/// computes the distances and their minimum two at a time: the smallest
+/// squared distance by halving, then the first point at it. The distances
+/// are the same operations as above, and minima and equality are exact, so
+/// the answer is the same.
+template <int kCount>
+int first_nearest(const double* xs, const double* ys, const Eigen::Vector2d& q) {
+  static_assert(kCount > 0 && (kCount & (kCount - 1)) == 0);
+  double d2[kCount], lowest[kCount];
+  for (int k = 0; k < kCount; ++k) {
+    const double dx = xs[k] - q.x(), dy = ys[k] - q.y();
+    lowest[k] = d2[k] = dx * dx + dy * dy;
+  }
+  for (int half = kCount / 2; half > 0; half /= 2)
+    for (int k = 0; k < half; ++k) lowest[k] = lowest[k + half] < lowest[k] ? lowest[k + half] : lowest[k];
+  if (!(lowest[0] < std::numeric_limits<double>::infinity())) return -1;
+  int first = 0;  // found without branching on which it is (that is unpredictable)
+  for (int k = kCount - 1; k >= 0; --k) first = d2[k] == lowest[0] ? k : first;
+  return first;
+}
+
 }  // namespace
 
 Eigen::Vector3d compose(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
@@ -188,6 +226,25 @@ ReferenceScan::ReferenceScan(const ScanPoints& points, const MatchOptions& optio
     beam_ranges_.push_back(range);
   }
   beam_bearings_ = BearingIndex(std::move(beam_bearings));
+  pad_window();
+}
+
+void ReferenceScan::pad_window() {
+  // Padded position k holds usable point k − w: around the circle for a
+  // full-circle scan (as the window wraps), else a point at infinity, never
+  // the nearest.
+  const int n = static_cast<int>(points_.size());
+  const int w = std::max(1, options_.association_window);
+  const double far = std::numeric_limits<double>::infinity();
+  window_x_.assign(static_cast<std::size_t>(n + 2 * w), far);
+  window_y_.assign(static_cast<std::size_t>(n + 2 * w), far);
+  for (int k = 0; k < n + 2 * w; ++k) {
+    int j = k - w;
+    if (full_circle_ && n > 0) j = ((j % n) + n) % n;
+    if (j < 0 || j >= n) continue;
+    window_x_[static_cast<std::size_t>(k)] = points_[static_cast<std::size_t>(j)].x();
+    window_y_[static_cast<std::size_t>(k)] = points_[static_cast<std::size_t>(j)].y();
+  }
 }
 
 bool ReferenceScan::sees_through(const Eigen::Vector2d& q, const Bearing& b, double margin) const {
@@ -223,27 +280,23 @@ int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q) const {
 }
 
 int ReferenceScan::nearest_by_bearing(const Eigen::Vector2d& q, const Bearing& b) const {
+  return nearest_in_window(q, static_cast<int>(bearings_.first_not_below(b)));
+}
+
+int ReferenceScan::nearest_in_window(const Eigen::Vector2d& q, int at) const {
   const int n = static_cast<int>(points_.size());
   if (n == 0) return -1;
   // Projective association: the reference beams around q's bearing are the
-  // ones that could have seen q; the nearest of them is its partner.
-  const int at = static_cast<int>(bearings_.first_not_below(b));
+  // ones that could have seen q; the nearest of them is its partner. The
+  // window [at − w, at + w) starts at padded position `at` (pad_window), the
+  // first of equally near beams in it wins.
   const int w = std::max(1, options_.association_window);
-  int best = -1;
-  double best_d2 = std::numeric_limits<double>::infinity();
-  auto consider = [&](int j) {
-    const double d2 = (points_[static_cast<std::size_t>(j)] - q).squaredNorm();
-    if (d2 < best_d2) {
-      best_d2 = d2;
-      best = j;
-    }
-  };
-  if (full_circle_) {
-    for (int k = at - w; k < at + w; ++k) consider(((k % n) + n) % n);
-  } else {
-    for (int j = std::max(0, at - w); j < std::min(n, at + w); ++j) consider(j);
-  }
-  return best;
+  const double* xs = window_x_.data() + at;
+  const double* ys = window_y_.data() + at;
+  const int k = w == 4 ? first_nearest<8>(xs, ys, q) : first_nearest(xs, ys, 2 * w, q);
+  if (k < 0) return -1;
+  const int j = at - w + k;
+  return full_circle_ ? ((j % n) + n) % n : j;
 }
 
 // ---- Moving objects -----------------------------------------------------------
@@ -301,6 +354,7 @@ int ReferenceScan::drop_moving(const ScanPoints& older, const Eigen::Vector3d& o
   ranges_.resize(j);
   normals_.resize(j);
   bearings_ = BearingIndex(std::move(kept_bearings));
+  pad_window();
   return dropped;
 }
 
@@ -546,6 +600,9 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
   // kept across iterations).
   std::vector<Eigen::Vector2d> moved(current.size()), turned(current.size());
   std::vector<std::vector<PlacedPoint>> placed(layers.size());
+  // Per layer: where each point's bearing falls among the layer's (the
+  // window of its look-up), then the index of its partner there (or −1).
+  std::vector<int> window(current.size()), partner(current.size());
   auto mark_moving = [&] {
     for (std::size_t i = 0; i < current.size(); ++i) {
       moving[i] = 0;
@@ -587,11 +644,16 @@ ReferenceScan::Local ReferenceScan::icp(const ScanPoints& current, const Eigen::
       // own frame (place_in), where it is paired by bearing (that scan's beams
       // could have seen it). Its partner's normal n there is R_P n here.
       const Eigen::Matrix2d Rp = rotation(layer.pose[2]);
+      // The look-ups in passes of their own: independent of each other, they
+      // overlap in the processor instead of waiting on each pair's arithmetic.
+      for (std::size_t i = 0; i < current.size(); ++i)
+        window[i] = static_cast<int>(ref.bearings_.first_not_below(placed[l][i].bearing));
+      for (std::size_t i = 0; i < current.size(); ++i)
+        partner[i] = moving[i] ? -1 : ref.nearest_in_window(placed[l][i].local, window[i]);
       for (std::size_t i = 0; i < current.size(); ++i) {
-        if (moving[i]) continue;
-        const Eigen::Vector2d& local = placed[l][i].local;
-        const int j = ref.nearest_by_bearing(local, placed[l][i].bearing);
+        const int j = partner[i];
         if (j < 0) continue;
+        const Eigen::Vector2d& local = placed[l][i].local;
         const Eigen::Vector2d& p = ref.points_[static_cast<std::size_t>(j)];
         const Eigen::Vector2d d = local - p;
         const Eigen::Vector2d& n_local = ref.normals_[static_cast<std::size_t>(j)];

@@ -68,10 +68,13 @@
 //     1–2 s apart) gets the overlap of several scans instead of one.
 //     Each key scan is prepared once, when it is added; per iteration every
 //     current point is placed in every reference once, its bearing there
-//     shared by the free-space check, the overlap count and the pairing, and
-//     looked up by bearings.hpp (an approximate atan2 that defers to
-//     std::atan2 near a threshold, a bucket index instead of a binary
-//     search): the same results as std::atan2 and std::lower_bound, faster.
+//     shared by the free-space check and the pairing, and looked up by
+//     bearings.hpp (an approximate atan2 that defers to std::atan2 near a
+//     threshold, a bucket index instead of a binary search): the same
+//     results as std::atan2 and std::lower_bound, faster. The 2w beams of a
+//     look-up's window are read from coordinate arrays padded at both ends
+//     (no bounds checks) and compared two at a time; the overlap is counted
+//     once, at the last iteration.
 //  9. Free space (free_space_margin > 0): a current point placed in a
 //     reference scan (the previous one or a key scan) where that scan's beams
 //     passed through and ended well beyond it was not there then: a person
@@ -262,6 +265,11 @@ class ReferenceScan {
   int nearest_by_bearing(const Eigen::Vector2d& q) const;
   /// The same for q whose bearing atan2(q_y, q_x) is already known.
   int nearest_by_bearing(const Eigen::Vector2d& q, const Bearing& bearing) const;
+  /// The same for q whose bearing lies just below bearings_[at]
+  /// (bearings_.first_not_below gives `at`).
+  int nearest_in_window(const Eigen::Vector2d& q, int at) const;
+  /// Fills window_x_, window_y_ from points_ (after every change of points_).
+  void pad_window();
   /// Largest gap between neighbouring beams at range ρ (m).
   double beam_gap(double range) const;
   /// Whether this scan's beams passed q (in this frame) and ended more than
@@ -276,6 +284,10 @@ class ReferenceScan {
   std::vector<double> ranges_;            ///< range |p| of each
   std::vector<Eigen::Vector2d> normals_;  ///< unit normal of each
   BearingIndex bearings_;                 ///< bearing of each (ascending)
+  /// x and y of each, padded with association_window positions on each side
+  /// (pad_window), so that a look-up's window needs no bounds checks and its
+  /// distances can be computed side by side (nearest_in_window).
+  std::vector<double> window_x_, window_y_;
   ScanPoints all_points_;                 ///< every reference point, in beam order (for the correlative grid)
   BearingIndex beam_bearings_;            ///< bearing of every point, ascending (free space)…
   std::vector<double> beam_ranges_;       ///< …and its range
