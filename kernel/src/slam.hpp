@@ -299,6 +299,14 @@ class Slam {
   /// `matched`: (feature index, its candidate) of each match.
   void note_anchor(const std::vector<std::pair<int, const Candidate*>>& matched);
   void check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths, const DataStep& data);
+  /// How far placement T puts the robot from where the ground truth says it is relative to the poses at which it
+  /// first saw the old features (median over `seen_paths`): metres, radians; nothing without ground truth.
+  std::optional<std::pair<double, double>> disagreement_with_ground_truth(const PlanarMotion& T,
+                                                                         const std::vector<double>& seen_paths,
+                                                                         const DataStep& data) const;
+  /// For the debug log of a refused search: how far its best placement and the estimate are from the truth.
+  std::string ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& old,
+                                   const DataStep& data) const;
   /// A number that changes when the set of features `idx` does: a search
   /// with the same local map gives the same answer (slam_loop_closure.cpp).
   std::int64_t local_map_signature(const std::vector<int>& idx) const;

@@ -109,9 +109,9 @@ void Slam::note_anchor(const std::vector<std::pair<int, const Candidate*>>& matc
 // the old feature (created it) must be the true relative pose (relative poses do not
 // depend on how the old map as a whole has drifted). The median over the
 // pairs is compared with 1 m and 5°.
-void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths,
-                                      const DataStep& data) {
-  if (!data.ground_truth || ground_truth_.empty()) return;
+std::optional<std::pair<double, double>> Slam::disagreement_with_ground_truth(
+    const PlanarMotion& T, const std::vector<double>& seen_paths, const DataStep& data) const {
+  if (!data.ground_truth || ground_truth_.empty()) return std::nullopt;
   const auto planar = [](const Pose6& x) { return Eigen::Vector3d(x[kX], x[kY], x[kTheta]); };
   const auto relative = [](const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
     const double c = std::cos(from.z()), s = std::sin(from.z());
@@ -133,12 +133,19 @@ void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<d
     position.push_back(e.head<2>().norm());
     heading.push_back(std::abs(wrap_angle(e.z())));
   }
-  if (position.empty()) return;
+  if (position.empty()) return std::nullopt;
   const auto median = [](std::vector<double> v) {
     std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
     return v[v.size() / 2];
   };
-  const double disagreement = median(position), heading_disagreement = median(heading);
+  return std::pair{median(position), median(heading)};
+}
+
+void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths,
+                                      const DataStep& data) {
+  const auto off = disagreement_with_ground_truth(T, seen_paths, data);
+  if (!off) return;
+  const auto [disagreement, heading_disagreement] = *off;
   ++stats_.loop_checked;
   stats_.loop_worst_disagreement = std::max(stats_.loop_worst_disagreement, disagreement);
   if (disagreement > 1.0 || heading_disagreement > 5.0 * std::numbers::pi / 180.0) {
@@ -146,6 +153,23 @@ void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<d
     log_->warn("step ", step_, ": the loop closure disagrees with the ground truth by ", disagreement, " m, ",
                heading_disagreement * 180.0 / std::numbers::pi, " deg: a false closure");
   }
+}
+
+std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& old,
+                                      const DataStep& data) const {
+  if (match.best.pairs.empty()) return {};
+  std::vector<double> seen;
+  for (const auto& [li, oi] : match.best.pairs)
+    seen.push_back(features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)].created_path);
+  const auto best = disagreement_with_ground_truth(match.best.motion, seen, data);
+  const auto now = disagreement_with_ground_truth(PlanarMotion{}, seen, data);
+  if (!best || !now) return {};
+  std::ostringstream out;
+  out.precision(3);
+  out << " (ground truth: the best placement is " << best->first << " m, " << best->second * 180.0 / std::numbers::pi
+      << " deg off; the estimate without it " << now->first << " m, " << now->second * 180.0 / std::numbers::pi
+      << " deg)";
+  return out.str();
 }
 
 std::int64_t Slam::local_map_signature(const std::vector<int>& idx) const {
@@ -238,7 +262,7 @@ void Slam::close_loops(const DataStep& data) {
                  " deg)");
     } else if (log_->enabled(LogLevel::Debug)) {
       log_->debug("step ", step_, ": map matching, ", local.size(), " local and ", old.size(), " old features: ",
-                  match.reason);
+                  match.reason, ground_truth_verdict(match, old, data));
     }
     return;
   }
@@ -275,7 +299,7 @@ void Slam::close_loops(const DataStep& data) {
       if (log_->enabled(LogLevel::Debug))
         log_->debug("step ", step_, ": map matching placed ", match.best.pairs.size(), " of ", local.size(),
                     " local features (", match.best.motion.t.norm(), " m, ",
-                    match.best.motion.theta * 180.0 / std::numbers::pi, " deg): waiting for the next search");
+                    match.best.motion.theta * 180.0 / std::numbers::pi, " deg): waiting for the next search", ground_truth_verdict(match, old, data));
       return;
     }
     pending_closure_ = PendingClosure{};
