@@ -35,6 +35,10 @@ std::vector<ParamSpec> LaserLinesExtractor::param_specs() {
       param_double("breakpoint_lambda_deg", d.breakpoint_lambda / kDeg,
                    "λ of the adaptive breakpoint detector (deg; smaller splits clusters less often)", 1.0, 89.0),
       param_double("split_distance", d.split_distance, "split-and-merge distance threshold (m)", 1e-4),
+      param_int("bridge_no_returns", d.bridge_no_returns,
+                "beams without any return (range 0: dropouts) a line may span, and an end's class looks past, "
+                "at most in a row; a return beyond max_range is never bridged (0: every no-return cuts a line)",
+                0.0, 10.0),
       param_int("min_points", d.min_points, "fewest inliers of a segment", 2.0),
       param_double("min_length", d.min_length, "shortest segment (m)", 0.0),
       param_double("max_rms", d.max_rms, "largest rms residual of a segment (m)", 1e-6),
@@ -57,6 +61,7 @@ LaserLinesExtractor::LaserLinesExtractor(const PluginArgs& args) {
   config_.max_range = p.get_double("max_range");
   config_.breakpoint_lambda = p.get_double("breakpoint_lambda_deg") * kDeg;
   config_.split_distance = p.get_double("split_distance");
+  config_.bridge_no_returns = static_cast<int>(p.get_int("bridge_no_returns"));
   config_.min_points = static_cast<int>(p.get_int("min_points"));
   config_.min_length = p.get_double("min_length");
   config_.max_rms = p.get_double("max_rms");

@@ -64,29 +64,39 @@ LineFit fit_line(const ScanPoints& scan, int first, int last) {
   return fit;
 }
 
-/// Step 1: runs of valid beams split at adaptive breakpoints.
-std::vector<std::pair<int, int>> clusters(const ScanPoints& scan, const LineConfig& c) {
+/// A beam without any return: range 0 (what the sources write for the
+/// laser's no-return and error codes), negative or not finite. Unlike a
+/// return beyond max_range (the beam went through an opening) it says
+/// nothing about what lies there: a dropout.
+bool no_return(double range) { return !(range > 0.0) || !std::isfinite(range); }
+
+/// Step 1: runs of beams with a return split at adaptive breakpoints. `dense`
+/// holds only the usable beams of `scan`, `beam_of` their indices in it: a
+/// run goes on across at most c.bridge_no_returns beams without any return (a
+/// dropout inside a wall; the breakpoint test then spans the wider angle),
+/// never across a return that is too far or too close.
+std::vector<std::pair<int, int>> clusters(const ScanPoints& scan, const ScanPoints& dense,
+                                          const std::vector<int>& beam_of, const LineConfig& c) {
   std::vector<std::pair<int, int>> out;
-  int start = -1;
-  for (int i = 0; i < scan.size(); ++i) {
-    if (!scan.valid[i]) {
-      if (start >= 0) out.emplace_back(start, i - 1);
-      start = -1;
-      continue;
-    }
-    if (start >= 0) {
-      const double dphi = std::abs(scan.bearings[i] - scan.bearings[i - 1]);
-      const double r = std::min(scan.ranges[i], scan.ranges[i - 1]);
+  if (dense.size() == 0) return out;
+  int start = 0;
+  for (int i = 1; i < dense.size(); ++i) {
+    const int from = beam_of[static_cast<std::size_t>(i) - 1], to = beam_of[static_cast<std::size_t>(i)];
+    bool breaks = to - from - 1 > c.bridge_no_returns;
+    for (int j = from + 1; j < to && !breaks; ++j) breaks = !no_return(scan.ranges[j]);
+    const double dphi = std::abs(dense.bearings[i] - dense.bearings[i - 1]);
+    breaks = breaks || dphi >= c.breakpoint_lambda;
+    if (!breaks) {
+      const double r = std::min(dense.ranges[i], dense.ranges[i - 1]);
       const double limit = r * std::sin(dphi) / std::sin(c.breakpoint_lambda - dphi) + 3.0 * c.range_sigma;
-      if ((scan.p.col(i) - scan.p.col(i - 1)).norm() > limit) {
-        out.emplace_back(start, i - 1);
-        start = i;
-      }
-    } else {
+      breaks = (dense.p.col(i) - dense.p.col(i - 1)).norm() > limit;
+    }
+    if (breaks) {
+      out.emplace_back(start, i - 1);
       start = i;
     }
   }
-  if (start >= 0) out.emplace_back(start, scan.size() - 1);
+  out.emplace_back(start, dense.size() - 1);
   return out;
 }
 
@@ -175,24 +185,37 @@ Vec2 end_point(const Segment& s, double along) {
 
 /// Where segment `self` meets another segment at a corner at the end whose
 /// last inlier is beam `end_beam`: the two lines' intersection; none when no
-/// segment within two beams meets it at min_corner_angle or more.
+/// segment within two beams (plus the bridged no-returns) meets it at
+/// min_corner_angle or more.
 std::optional<Vec2> corner_point(const std::vector<Segment>& segs, std::size_t self, int end_beam, double end_s,
                                  const LineConfig& c) {
   for (std::size_t k = 0; k < segs.size(); ++k) {
     if (k == self) continue;
     const Segment& o = segs[k];
     const int beam_gap = std::min(std::abs(o.first - end_beam), std::abs(o.last - end_beam));
-    if (beam_gap > 2 || line_angle(o.alpha, segs[self].alpha) < c.min_corner_angle) continue;
+    if (beam_gap > 2 + c.bridge_no_returns || line_angle(o.alpha, segs[self].alpha) < c.min_corner_angle) continue;
     Vec2 q;
     if (intersect(segs[self], o, q) && (q - end_point(segs[self], end_s)).norm() <= c.corner_distance) return q;
   }
   return std::nullopt;
 }
 
+/// The beam that tells why a segment stops at its end beam `end_beam` (`step`
+/// = ±1 points outwards): the next one, or, past up to c.bridge_no_returns
+/// beams without any return (no_return(): a dropout says nothing about the
+/// wall), the first usable one. When none within reach is, the next beam.
+int beam_beyond(const ScanPoints& scan, int end_beam, int step, const LineConfig& c) {
+  int j = end_beam + step;
+  for (int skipped = 0; skipped < c.bridge_no_returns && j >= 0 && j < scan.size() && no_return(scan.ranges[j]);
+       ++skipped)
+    j += step;
+  return j >= 0 && j < scan.size() && scan.valid[j] ? j : end_beam + step;
+}
+
 /// Why segment `self` stops at its end with last inlier `end_beam`; `step` = ±1 points outwards.
 EndReason classify_end(const ScanPoints& scan, const std::vector<Segment>& segs, const std::vector<LineFit>& fits,
                        std::size_t self, int end_beam, int step, double end_s, const LineConfig& c) {
-  const int j = end_beam + step;
+  const int j = beam_beyond(scan, end_beam, step, c);
   if (j < 0 || j >= scan.size()) return EndReason::Fov;
   const double r = scan.ranges[j];
   if (!scan.valid[j]) return r > 0.0 && r < c.min_range ? EndReason::Occluded : EndReason::MaxRange;
@@ -218,7 +241,7 @@ EndEstimate end_estimate(const ScanPoints& scan, const std::vector<Segment>& seg
                          std::size_t self, int end_beam, int step, double end_s, EndReason reason, double sigma2,
                          const LineConfig& c) {
   constexpr double kMaxGap = 1.0;
-  const int j = end_beam + step;
+  const int j = beam_beyond(scan, end_beam, step, c);
   double gap = scan.ranges[end_beam] * std::abs(scan.bearings[std::clamp(j, 0, scan.size() - 1)] -
                                                 scan.bearings[end_beam]);
   std::optional<double> next_crossing;
@@ -264,11 +287,28 @@ std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen
     scan.p.col(i) = ranges[i] * Vec2(std::cos(bearings[i]), std::sin(bearings[i]));
   }
 
+  // Lines are fitted to the beams with a return (`dense`; beam_of: their
+  // indices in the scan), so that a segment may span a dropout (clusters());
+  // its ends are classified on the whole scan.
+  std::vector<int> beam_of;
+  for (int i = 0; i < scan.size(); ++i)
+    if (scan.valid[i]) beam_of.push_back(i);
+  const auto n_dense = static_cast<Eigen::Index>(beam_of.size());
+  Eigen::VectorXd dense_ranges(n_dense), dense_bearings(n_dense);
+  ScanPoints dense{dense_ranges, dense_bearings, Eigen::Matrix2Xd(2, n_dense),
+                   std::vector<bool>(beam_of.size(), true)};
+  for (Eigen::Index i = 0; i < n_dense; ++i) {
+    const int beam = beam_of[static_cast<std::size_t>(i)];
+    dense_ranges[i] = ranges[beam];
+    dense_bearings[i] = bearings[beam];
+    dense.p.col(i) = scan.p.col(beam);
+  }
+
   std::vector<std::pair<int, int>> pieces;
-  for (const auto& [first, last] : clusters(scan, c)) {
+  for (const auto& [first, last] : clusters(scan, dense, beam_of, c)) {
     std::vector<std::pair<int, int>> cluster_pieces;
-    split(scan, first, last, c.split_distance, cluster_pieces);
-    merge(scan, c.split_distance, cluster_pieces);
+    split(dense, first, last, c.split_distance, cluster_pieces);
+    merge(dense, c.split_distance, cluster_pieces);
     pieces.insert(pieces.end(), cluster_pieces.begin(), cluster_pieces.end());
   }
 
@@ -277,16 +317,16 @@ std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen
   std::vector<LineFit> fits;
   for (auto [first, last] : pieces) {
     if (last - first + 1 < c.min_points) continue;
-    const LineFit fit = trim(scan, first, last, trim_limit);
+    const LineFit fit = trim(dense, first, last, trim_limit);
     if (fit.n < c.min_points || fit.rms > c.max_rms || fit.rho < 1e-3) continue;
     Segment s;
-    s.first = first;
-    s.last = last;
+    s.first = beam_of[static_cast<std::size_t>(first)];
+    s.last = beam_of[static_cast<std::size_t>(last)];
     s.rho = fit.rho;
     s.alpha = fit.alpha;
     s.rms = fit.rms;
-    s.inliers = scan.p.middleCols(first, fit.n);
-    const double s_first = fit.t().dot(scan.p.col(first)), s_last = fit.t().dot(scan.p.col(last));
+    s.inliers = dense.p.middleCols(first, fit.n);
+    const double s_first = fit.t().dot(dense.p.col(first)), s_last = fit.t().dot(dense.p.col(last));
     s.s_a = std::min(s_first, s_last);
     s.s_b = std::max(s_first, s_last);
     if (s.s_b - s.s_a < c.min_length) continue;
