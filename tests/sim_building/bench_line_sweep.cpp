@@ -11,8 +11,8 @@
 // One line per laser preset, summed over the plans and seeds (the shortest
 // route of each: loop 0 twice).
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <cstdio>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -22,53 +22,41 @@
 
 using namespace mspace::sim_building;
 
-namespace {
-
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream in(s);
-  for (std::string item; std::getline(in, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
   CLI::App app{"laser_lines against the floor plan, per laser preset"};
-  std::string plans = "ring,ladder,l_ring,long_loop,grid,symmetric", seeds = "1,2", lasers = "all";
+  std::vector<std::string> plans{"ring", "ladder", "l_ring", "long_loop", "grid", "symmetric"}, lasers{"all"};
+  std::vector<std::uint64_t> seeds{1, 2};
   std::size_t stride = 2;
   int bridge = 2;
-  app.add_option("--plans", plans, "comma-separated plan names");
-  app.add_option("--seeds", seeds, "comma-separated seeds (world seed = seed)");
-  app.add_option("--lasers", lasers, "comma-separated laser presets, or all");
+  app.add_option("--plans", plans, "comma-separated plan names")->delimiter(',');
+  app.add_option("--seeds", seeds, "comma-separated seeds (world seed = seed)")->delimiter(',');
+  app.add_option("--lasers", lasers, "comma-separated laser presets, or all")->delimiter(',');
   app.add_option("--stride", stride, "score every stride-th scan");
   app.add_option("--bridge", bridge, "bridge_no_returns to compare with 0");
   CLI11_PARSE(app, argc, argv);
 
-  std::vector<std::string> presets;
-  if (lasers == "all") {
+  std::vector<std::string> presets = lasers;
+  if (lasers == std::vector<std::string>{"all"}) {
+    presets.clear();
     for (const auto& [name, description] : laser_presets()) presets.push_back(name);
-  } else {
-    presets = split_list(lasers);
   }
   mspace::laser_lines::LineConfig configured = intel_walls_line_config();
   configured.bridge_no_returns = bridge;
   mspace::laser_lines::LineConfig cutting = configured;
   cutting.bridge_no_returns = 0;
 
-  std::printf("laser_lines (config/intel_walls.yaml, bridge_no_returns %d | 0) on plans %s, seeds %s, every %zu-th "
-              "scan\n",
-              configured.bridge_no_returns, plans.c_str(), seeds.c_str(), stride);
+  std::printf("laser_lines (config/intel_walls.yaml, bridge_no_returns %d | 0) on %zu plans × %zu seeds, every "
+              "%zu-th scan\n",
+              configured.bridge_no_returns, plans.size(), seeds.size(), stride);
   std::printf("%-20s %6s %7s | %9s %9s %9s %9s | %9s %9s %9s %9s\n", "laser", "scans", "pieces", "precision",
               "recall", "end prec", "end rec", "prec (0)", "rec (0)", "e.prec(0)", "e.rec(0)");
   for (const std::string& preset : presets) {
     LineScore with, without;
-    for (const std::string& plan : split_list(plans))
-      for (const std::string& seed : split_list(seeds)) {
+    for (const std::string& plan : plans)
+      for (const std::uint64_t seed : seeds) {
         GeneratorSettings settings;
         settings.plan = plan;
-        settings.world_seed = settings.seed = std::stoull(seed);
+        settings.world_seed = settings.seed = seed;
         settings.route.length_m = 0.0;
         settings.laser = laser_preset(preset);
         const Simulation sim = simulate(settings);

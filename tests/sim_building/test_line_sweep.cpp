@@ -16,6 +16,7 @@
 
 #include <cstdio>
 #include <string>
+#include <utility>
 
 #include "building_log.hpp"
 #include "laser.hpp"
@@ -35,16 +36,22 @@ Simulation building(const std::string& laser, double dropout = -1.0) {
   return simulate(settings);
 }
 
+/// intel_walls.yaml's extractor settings with bridge_no_returns 2 (first) and 0 (second).
+std::pair<mspace::laser_lines::LineConfig, mspace::laser_lines::LineConfig> bridged_and_cutting() {
+  mspace::laser_lines::LineConfig bridged = intel_walls_line_config();
+  bridged.bridge_no_returns = 2;
+  mspace::laser_lines::LineConfig cutting = bridged;
+  cutting.bridge_no_returns = 0;
+  return {bridged, cutting};
+}
+
 void print(const char* what, const LineScore& s) {
   std::printf("  %-44s %5zu scans, %5zu pieces: precision %.3f recall %.3f, real ends: precision %.3f recall %.3f\n",
               what, s.scans, s.visible, s.precision(), s.recall(), s.end_precision(), s.end_recall());
 }
 
 TEST(LineSweep, DropoutsDoNotCutLines) {
-  mspace::laser_lines::LineConfig configured = intel_walls_line_config();
-  configured.bridge_no_returns = 2;
-  mspace::laser_lines::LineConfig cutting = configured;
-  cutting.bridge_no_returns = 0;
+  const auto [configured, cutting] = bridged_and_cutting();
 
   const Simulation dropping = building("robotlaser_logged");
   ASSERT_GT(dropping.settings.laser.dropout_probability, 0.1);
@@ -70,10 +77,7 @@ TEST(LineSweep, DropoutsDoNotCutLines) {
 }
 
 TEST(LineSweep, BridgingCostsNothingWithoutDropouts) {
-  mspace::laser_lines::LineConfig configured = intel_walls_line_config();
-  configured.bridge_no_returns = 2;
-  mspace::laser_lines::LineConfig cutting = configured;
-  cutting.bridge_no_returns = 0;
+  const auto [configured, cutting] = bridged_and_cutting();
   const Simulation sim = building("sick181");
   ASSERT_EQ(sim.settings.laser.dropout_probability, 0.0);
   const LineScore bridged = score_lines(sim, configured, 2);
