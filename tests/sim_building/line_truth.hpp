@@ -23,6 +23,7 @@
 #pragma once
 
 #include <cstddef>
+#include <numbers>
 #include <string>
 
 #include "building_log.hpp"
@@ -34,7 +35,7 @@ namespace mspace::sim_building {
 /// presets' range noise, well below the 0.2 m thickness of a wall.
 inline constexpr double kLineDistance = 0.05;
 /// …and its direction this close to the wall's (rad, 3°).
-inline constexpr double kLineAngle = 3.0 * 3.14159265358979323846 / 180.0;
+inline constexpr double kLineAngle = 3.0 * std::numbers::pi / 180.0;
 /// A real end lies this close to an end of its wall (m): the beam spacing
 /// at 8 m with 1° resolution.
 inline constexpr double kEndDistance = 0.15;
