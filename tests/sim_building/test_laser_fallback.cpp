@@ -27,6 +27,7 @@
 #include "logged_source.hpp"
 #include "logging.hpp"
 #include "mspace/params.hpp"
+#include "test_paths.hpp"
 
 namespace {
 
@@ -76,7 +77,7 @@ TEST_P(LoggedLaser, NoIncrementIsWorseThanTheWheelsAllowAndFallbacksAreCounted) 
   settings.laser.gap_probability = 0.01;  // a few minute-long gaps on this short route
   const sim_building::Simulation sim = sim_building::simulate(settings);
   ASSERT_GE(sim.gaps, 1u) << "the route should cross a logging gap";
-  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / ("logged_" + settings.plan);
+  const fs::path dir = test::scratch_dir("laser_fallback", "logged_" + settings.plan);
   sim_building::write_data_set(sim, dir);
 
   const Params defaults = Params::defaults(carmen_log::CarmenLogSource::param_specs());

@@ -38,6 +38,7 @@
 #include "plugin_registry.hpp"
 #include "runner.hpp"
 #include "slam.hpp"
+#include "test_paths.hpp"
 
 namespace {
 
@@ -58,8 +59,8 @@ fs::path building_with_gaps(const std::string& plan, std::uint64_t seed) {
   settings.laser.gap_min = 40.0;
   settings.laser.gap_max = 80.0;
   const sim_building::Simulation sim = sim_building::simulate(settings);
-  const fs::path dir =
-      fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / (plan + "_" + std::to_string(seed) + "_gaps");
+  // Each test writes its own copy: ctest runs tests in parallel.
+  const fs::path dir = test::scratch_dir("loop_closing_run", plan + "_" + std::to_string(seed) + "_gaps");
   sim_building::write_data_set(sim, dir);
   return dir;
 }

@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <ostream>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -31,6 +32,7 @@
 #include "scan_matcher.hpp"
 #include "sensor_health.hpp"
 #include "slam.hpp"
+#include "test_paths.hpp"
 
 namespace {
 
@@ -42,6 +44,9 @@ struct Case {
   std::string plan, laser;
   std::uint64_t seed;
 };
+
+/// How gtest prints a case in its log (instead of 72 raw bytes).
+void PrintTo(const Case& c, std::ostream* os) { *os << c.plan << " " << c.laser << " seed " << c.seed; }
 
 class NeverWorse : public ::testing::TestWithParam<Case> {};
 
@@ -103,8 +108,8 @@ fs::path generate(const Case& c) {
   settings.laser = sim_building::laser_preset(c.laser);
   const sim_building::Simulation sim = sim_building::simulate(settings);
   EXPECT_GE(sim.plan.people.size(), 1u) << c.plan;
-  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" /
-                       (c.plan + "_" + c.laser + "_" + std::to_string(c.seed));
+  // Each test writes its own copy: ctest runs tests in parallel.
+  const fs::path dir = test::scratch_dir("never_worse", c.plan + "_" + c.laser + "_" + std::to_string(c.seed));
   sim_building::write_data_set(sim, dir);
   setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
   return dir;

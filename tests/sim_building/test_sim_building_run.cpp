@@ -22,6 +22,7 @@
 #include "relations.hpp"
 #include "runner.hpp"
 #include "slam.hpp"
+#include "test_paths.hpp"
 
 namespace {
 
@@ -31,7 +32,7 @@ namespace fs = std::filesystem;
 
 TEST(SimBuildingRun, WallsOnWheelOdometryAreNotWorseThanTheOdometry) {
   set_log_level(LogLevel::Warn);
-  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / "ring_1";
+  const fs::path dir = test::scratch_dir("sim_building_run", "ring_1");
   const sim_building::Simulation sim = test::write_ring_building(dir);
 
   PluginRegistry registry;
@@ -79,7 +80,7 @@ TEST(SimBuildingRun, WallsOnWheelOdometryAreNotWorseThanTheOdometry) {
 // 0.039 m / 0.15° (48). The bounds are the wheel-odometry run's level.
 TEST(SimBuildingRun, WallsOnLaserOdometryWithPeopleCloseTheLoops) {
   set_log_level(LogLevel::Warn);
-  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / "ring_1_laser";
+  const fs::path dir = test::scratch_dir("sim_building_run", "ring_1_laser");
   const sim_building::Simulation sim = test::write_ring_building(dir);
   ASSERT_GE(sim.plan.people.size(), 2u);
   PluginRegistry registry;
@@ -110,7 +111,7 @@ TEST(SimBuildingRun, WallsOnLaserOdometryWithPeopleCloseTheLoops) {
 // which for a few steps is only their reading.
 TEST(SimBuildingRun, LoadingTheLogIsTimedAsTheSourcesLoad) {
   set_log_level(LogLevel::Warn);
-  const fs::path dir = fs::path(MSPACE_BINARY_DIR) / "tests" / "sim_building" / "ring_1";
+  const fs::path dir = test::scratch_dir("sim_building_run", "ring_1");
   test::write_ring_building(dir);  // (sets MSPACE_SIM_BUILDING)
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
