@@ -150,14 +150,31 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
                            static_cast<double>(s.loop_attempts), static_cast<double>(s.loop_closures),
                            static_cast<double>(s.loop_ambiguous), static_cast<double>(s.loop_merged),
                            static_cast<double>(s.loop_checked), static_cast<double>(s.loop_false),
-                           s.loop_worst_disagreement, s.seconds_loops, static_cast<double>(s.loop_unconfirmed)}));
+                           s.loop_worst_disagreement, s.seconds_loops, static_cast<double>(s.loop_unconfirmed),
+                           static_cast<double>(s.loop_scan_placed)}));
   const PendingClosure& pending = pending_closure_;
   run.put("loop_pending", row_of({pending.active ? 1.0 : 0.0, pending.motion.theta, pending.motion.t.x(),
                                   pending.motion.t.y(), pending.motion.pivot.x(), pending.motion.pivot.y(),
-                                  pending.sigma_translation, pending.sigma_rotation}));
+                                  pending.sigma_translation, pending.sigma_rotation, pending.seeded ? 1.0 : 0.0,
+                                  pending.path}));
   Eigen::MatrixXd pending_ids(static_cast<Eigen::Index>(pending.local_ids.size()), 1);
   for (std::size_t i = 0; i < pending.local_ids.size(); ++i) pending_ids(static_cast<Eigen::Index>(i), 0) = pending.local_ids[i];
   run.put("loop_pending_ids", pending_ids);
+  // association.loop_scans: every kept scan (record, path, sensor origin,
+  // range, number of end points) and their end points, in order.
+  Eigen::MatrixXd scan_index(static_cast<Eigen::Index>(scans_.size()), 6);
+  std::size_t n_points = 0;
+  for (const KeptScan& k : scans_) n_points += k.points.size();
+  Eigen::MatrixXd scan_points(static_cast<Eigen::Index>(n_points), 2);
+  Eigen::Index row = 0;
+  for (std::size_t i = 0; i < scans_.size(); ++i) {
+    const KeptScan& k = scans_[i];
+    scan_index.row(static_cast<Eigen::Index>(i)) << static_cast<double>(k.record), k.path, k.origin.x(), k.origin.y(),
+        k.range, static_cast<double>(k.points.size());
+    for (const Eigen::Vector2f& p : k.points) scan_points.row(row++) << p.x(), p.y();
+  }
+  run.put("loop_scans", scan_index);
+  run.put("loop_scan_points", scan_points);
 
   // Every plugin object with run-time state (PSTA).
   for (const PluginRef& p : plugin_objects(config_, *source_, *source_lib_, *motion_, *motion_lib_, *estimator_,
@@ -269,15 +286,34 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     const Eigen::MatrixXd& seconds = get_state(run, "seconds", 1, 7, "run state");
     const Eigen::MatrixXd& nees = get_state(run, "nees", -1, 1, "run state");
     const Eigen::MatrixXd& association = get_state(run, "association", 1, 4, "run state");
-    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 12, "run state");
-    const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, 8, "run state");
+    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 13, "run state");
+    const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, 10, "run state");
     const Eigen::MatrixXd& pending_ids = get_state(run, "loop_pending_ids", -1, 1, "run state");
+    const Eigen::MatrixXd& scan_index = get_state(run, "loop_scans", -1, 6, "run state");
+    const Eigen::MatrixXd& scan_points = get_state(run, "loop_scan_points", -1, 2, "run state");
+    std::vector<KeptScan> scans(static_cast<std::size_t>(scan_index.rows()));
+    Eigen::Index point_row = 0;
+    for (std::size_t i = 0; i < scans.size(); ++i) {
+      const auto r = static_cast<Eigen::Index>(i);
+      KeptScan& k = scans[i];
+      k.record = static_cast<std::size_t>(integer_at(scan_index.row(r), 0, 0, 1e15, "loop_scans record"));
+      k.path = scan_index(r, 1);
+      k.origin = Eigen::Vector2f(static_cast<float>(scan_index(r, 2)), static_cast<float>(scan_index(r, 3)));
+      k.range = static_cast<float>(scan_index(r, 4));
+      const auto count = static_cast<Eigen::Index>(integer_at(scan_index.row(r), 5, 0, 1e9, "loop_scans points"));
+      if (point_row + count > scan_points.rows()) throw fail("run state: 'loop_scans' counts more end points than 'loop_scan_points' holds");
+      for (Eigen::Index j = 0; j < count; ++j, ++point_row)
+        k.points.emplace_back(static_cast<float>(scan_points(point_row, 0)), static_cast<float>(scan_points(point_row, 1)));
+    }
+    if (point_row != scan_points.rows()) throw fail("run state: 'loop_scan_points' holds end points no scan counts");
     PendingClosure pending;
     pending.active = pending_row(0, 0) != 0.0;
     pending.motion = PlanarMotion{pending_row(0, 1), {pending_row(0, 2), pending_row(0, 3)},
                                   {pending_row(0, 4), pending_row(0, 5)}};
     pending.sigma_translation = pending_row(0, 6);
     pending.sigma_rotation = pending_row(0, 7);
+    pending.seeded = pending_row(0, 8) != 0.0;
+    pending.path = pending_row(0, 9);
     for (Eigen::Index i = 0; i < pending_ids.rows(); ++i)
       pending.local_ids.push_back(static_cast<int>(integer_at(pending_ids.row(i), 0, 0, 1e9, "loop_pending_ids")));
     const Eigen::MatrixXd& record_path = get_state(run, "record_path", -1, 1, "run state");
@@ -334,6 +370,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     s.loop_worst_disagreement = loops(0, 9);
     s.seconds_loops = loops(0, 10);
     s.loop_unconfirmed = integer_at(loops, 11, 0, 1e15, "loop_unconfirmed");
+    s.loop_scan_placed = integer_at(loops, 12, 0, 1e15, "loop_scan_placed");
 
     // The nonlinear problem (after the estimator, whose rows it checks; its
     // live factors bind to the restored features).
@@ -362,6 +399,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     last_loop_local_signature_ = static_cast<std::int64_t>(loops(0, 1));
     last_anchor_path_ = loops(0, 2);
     pending_closure_ = std::move(pending);
+    scans_ = std::move(scans);
   } catch (const PersistenceError&) {
     throw;
   } catch (const std::exception& e) {

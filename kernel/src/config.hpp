@@ -117,6 +117,11 @@ struct AssociationConfig {
   /// A hypothesis is refused when a clearly different one pairs this
   /// fraction of its features (a symmetric building).
   double loop_ambiguity_ratio = 0.7;
+  /// Range scans as evidence (scan_evidence.hpp): the recent scans are
+  /// placed on the old ones by an exhaustive correlative search in the same
+  /// window; a placement the scans contradict is refused, and a unique scan
+  /// placement is offered to the features as a hypothesis of its own.
+  bool loop_scans = false;
 };
 
 /// "nearest_neighbour" or "jcbb".

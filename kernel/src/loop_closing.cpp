@@ -543,9 +543,13 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   };
 
   std::vector<MapMatchHypothesis> verified;
-  for (const Peak& p : kept) {
+  std::vector<std::pair<PlanarMotion, bool>> starts;  // (motion, seeded)
+  for (const Peak& p : kept) starts.emplace_back(PlanarMotion{p.theta, p.t, pivot}, false);
+  for (const PlanarMotion& seed : options.seeds) starts.emplace_back(seed, true);
+  for (const auto& [start, seeded] : starts) {
     MapMatchHypothesis h;
-    h.motion = PlanarMotion{p.theta, p.t, pivot};
+    h.motion = start;
+    h.seeded = seeded;
     Eigen::Matrix3d H;
     Eigen::Vector3d grad;
     constexpr int kIterations = 6;
@@ -570,9 +574,17 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
                                       .eigenvalues()[1]));
       h.determined = h.sigma_translation <= o.max_translation_std && h.sigma_rotation <= o.max_rotation_std;
     }
+    if (h.seeded && !h.determined) {  // what the pairing leaves free, the seed's evidence fixed (to the bound)
+      h.sigma_translation = o.max_translation_std;
+      h.sigma_rotation = o.max_rotation_std;
+    }
     const bool inside = std::abs(h.motion.theta) <= o.max_rotation + o.rotation_step &&
                         h.motion.t.norm() <= o.max_translation + o.cell;
-    if (inside) verified.push_back(std::move(h));
+    if (options.dense_score) h.dense_score = options.dense_score(h.motion);
+    const bool kept_to_seed =
+        !seeded || ((h.motion.apply(pivot) - start.apply(pivot)).norm() <= options.seed_tolerance_translation &&
+                    angle_apart(h.motion.theta, start.theta) <= options.seed_tolerance_rotation);
+    if (inside && kept_to_seed) verified.push_back(std::move(h));
   }
   result.hypotheses = static_cast<int>(verified.size());
 
@@ -582,8 +594,14 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     return std::abs(h.motion.theta) <= options.max_rotation + o.rotation_step &&
            h.motion.t.norm() <= options.max_translation + o.cell;
   };
+  // (Without dense evidence every hypothesis passes.)
+  auto uncontradicted = [&](const MapMatchHypothesis& h) {
+    return !options.dense_score || h.dense_score >= options.dense_floor;
+  };
   auto valid = [&](const MapMatchHypothesis& h) {
-    return h.jointly_compatible && h.determined && static_cast<int>(h.pairs.size()) >= needed && in_window(h);
+    return h.jointly_compatible && (h.determined || h.seeded) &&
+           static_cast<int>(h.pairs.size()) >= (h.seeded ? options.seeded_min_matches : needed) && in_window(h) &&
+           uncontradicted(h);
   };
   auto better = [&](const MapMatchHypothesis& a, const MapMatchHypothesis& b) {
     if (valid(a) != valid(b)) return valid(a);
@@ -606,7 +624,8 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   for (const MapMatchHypothesis& h : verified) {
     const bool different = angle_apart(h.motion.theta, result.best.motion.theta) > 2.0 * o.rotation_step ||
                            (h.motion.t - result.best.motion.t).norm() > same_t;
-    if (different && h.jointly_compatible && static_cast<int>(h.pairs.size()) > result.rival_matches) {
+    if (different && h.jointly_compatible && uncontradicted(h) &&
+        static_cast<int>(h.pairs.size()) > result.rival_matches) {
       result.rival_matches = static_cast<int>(h.pairs.size());
       rival_moved = (h.motion.t - result.best.motion.t).norm();
       rival_turned = angle_apart(h.motion.theta, result.best.motion.theta) * 180.0 / std::numbers::pi;
@@ -620,6 +639,9 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     else if (!b.jointly_compatible)
       result.reason = "best pairing is not jointly compatible (D² " + std::to_string(b.d2) + ", " +
                       std::to_string(b.dof) + " dof)";
+    else if (!uncontradicted(b))
+      result.reason = "the other evidence contradicts the best pairing (score " + std::to_string(b.dense_score) +
+                      ", at least " + std::to_string(options.dense_floor) + " needed)";
     else if (!in_window(b))
       result.reason = "the best placement (" + std::to_string(b.motion.t.norm()) + " m, " +
                       std::to_string(b.motion.theta * 180.0 / std::numbers::pi) + " deg) lies outside the window";

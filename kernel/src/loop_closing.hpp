@@ -37,6 +37,8 @@
 // out. The kernel never names a feature type.
 #pragma once
 
+#include <functional>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -109,6 +111,25 @@ struct MapMatchOptions {
   /// corridors, rooms in a row), a window that happens to hold one copy
   /// and not the next must not make the one it holds look unique.
   double rival_window_factor = 2.0;
+  // Dense evidence (Slam: the range scans, scan_evidence.hpp); all optional.
+  /// A placement's score by other evidence, higher is better; empty: features alone decide.
+  std::function<double(const PlanarMotion&)> dense_score;
+  /// A hypothesis scoring below this is contradicted by that evidence: it is
+  /// never accepted and is no rival.
+  double dense_floor = -std::numeric_limits<double>::infinity();
+  /// Placements the other evidence found unique by itself (about the same
+  /// pivot): verified like the transform's peaks, and acceptable even when
+  /// the pairing leaves a direction of the motion free (a corridor's walls
+  /// without ends: the other evidence fixed it).
+  std::vector<PlanarMotion> seeds;
+  /// A hypothesis refined from a seed needs only this many pairs (the seed's
+  /// evidence placed the local map; the pairs say which features are the same).
+  int seeded_min_matches = 2;
+  /// A hypothesis refined from a seed is dropped when the pairing pulled the
+  /// pivot farther than this from where the seed put it (m), or turned it
+  /// more (rad): the features then disagree with the seed's evidence.
+  double seed_tolerance_translation = 0.45;
+  double seed_tolerance_rotation = 0.035;
 };
 
 /// One verified hypothesis.
@@ -119,6 +140,8 @@ struct MapMatchHypothesis {
   int dof = 0;                             ///< Σ dim rᵢ − 3
   bool jointly_compatible = false;
   bool determined = false;  ///< the pairing fixes θ, t_x, t_y to max_*_std
+  bool seeded = false;      ///< refined from one of MapMatchOptions::seeds
+  double dense_score = 0.0; ///< MapMatchOptions::dense_score of the motion (0 without)
   double sigma_translation = 0.0, sigma_rotation = 0.0;
 };
 

@@ -405,6 +405,8 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     y << YAML::Key << "refused_ambiguous" << YAML::Value << st.loop_ambiguous;
     y << YAML::Key << "refused_unconfirmed" << YAML::Value << st.loop_unconfirmed;
     y << YAML::Key << "features_merged" << YAML::Value << st.loop_merged;
+    if (slam.config().association.loop_scans)
+      y << YAML::Key << "placed_by_scans" << YAML::Value << st.loop_scan_placed;
     if (st.loop_checked > 0) {
       y << YAML::Key << "checked_against_ground_truth" << YAML::Value << st.loop_checked;
       y << YAML::Key << "false_closures" << YAML::Value << st.loop_false;
@@ -574,7 +576,8 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   if (slam.config().association.loop_closing)
     os << "  loop closing by map matching: " << st.loop_closures << " closures (" << st.loop_merged
        << " features merged) in " << st.loop_attempts << " searches, " << st.loop_ambiguous
-       << " refused as ambiguous, " << st.loop_unconfirmed << " not confirmed by the next search";
+       << " refused as ambiguous, " << st.loop_unconfirmed << " not confirmed by the next search"
+       << (slam.config().association.loop_scans ? ", " + std::to_string(st.loop_scan_placed) + " placed by the scans" : "");
   if (st.loop_checked > 0)
     os << "; against the ground truth " << st.loop_false << " of " << st.loop_checked
        << " false (worst disagreement " << st.loop_worst_disagreement << " m)";

@@ -665,7 +665,62 @@ bool linearize_coincidence(const MapFeature& a, const MapFeature& b, Eigen::Vect
   return true;
 }
 
+void Problem::relate(int from, int to, const Eigen::Vector3d& z, const Eigen::Matrix3d& C) {
+  if (from < 0 || to <= from || to >= num_pose_nodes())
+    throw std::invalid_argument("problem: a pose relation needs two pose nodes, the older first");
+  if (!z.allFinite() || !C.allFinite() || C.ldlt().info() != Eigen::Success || !C.ldlt().isPositive())
+    throw std::invalid_argument("problem: a pose relation needs a finite value and a positive definite covariance");
+  for (int dof : {kX, kY, kTheta})
+    if (std::find(c_.dofs.begin(), c_.dofs.end(), dof) == c_.dofs.end())
+      throw std::invalid_argument("problem: a pose relation needs x, y and theta among the estimated pose coordinates");
+  auto f = std::make_unique<Factor>();
+  f->kind = FactorKind::Coincidence;
+  f->feature_id = f->other_id = kNoFeature;
+  f->from = from;
+  f->to = to;
+  f->m.v = z;
+  f->m.C_v = C;
+  factors_.push_back(std::move(f));
+  ++loop_closures_;
+}
+
+// r = (R(θ_a)ᵀ (p_b − p_a), θ_b − θ_a) − z; J over the two nodes' planar
+// coordinates (the others get zero columns).
+bool Problem::evaluate_relation(const Factor& f, FactorLinearization& out) const {
+  out = {};
+  const Pose6 a = node_value(f.from), b = node_value(f.to);
+  const double c = std::cos(a[kTheta]), s = std::sin(a[kTheta]);
+  const Eigen::Vector2d d(b[kX] - a[kX], b[kY] - a[kY]);
+  Eigen::Matrix2d Rt;
+  Rt << c, s, -s, c;
+  out.eta.resize(3);
+  out.eta.head<2>() = Rt * d - f.m.v.head<2>();
+  out.eta[2] = wrap_angle(b[kTheta] - a[kTheta] - f.m.v[2]);
+  out.J = Eigen::MatrixXd::Zero(3, 2 * k_);
+  Eigen::Matrix2d dRt;  // ∂Rᵀ/∂θ_a
+  dRt << -s, c, -c, -s;
+  for (int j = 0; j < k_; ++j) {
+    const int dof = c_.dofs[static_cast<std::size_t>(j)];
+    if (dof == kX || dof == kY) {
+      const int axis = dof == kX ? 0 : 1;
+      out.J.block<2, 1>(0, j) = -Rt.col(axis);
+      out.J.block<2, 1>(0, k_ + j) = Rt.col(axis);
+    } else if (dof == kTheta) {
+      out.J.block<2, 1>(0, j) = dRt * d;
+      out.J(2, j) = -1.0;
+      out.J(2, k_ + j) = 1.0;
+    }
+  }
+  out.kind = FactorKind::Coincidence;
+  out.C = f.m.C_v;
+  out.robust = false;
+  for (int j = 0; j < k_; ++j) out.idx.push_back(pose_node_index(f.from) + j);
+  for (int j = 0; j < k_; ++j) out.idx.push_back(pose_node_index(f.to) + j);
+  return true;
+}
+
 bool Problem::evaluate_coincidence(const Factor& f, FactorLinearization& out) const {
+  if (f.feature_id == kNoFeature) return evaluate_relation(f, out);
   out = {};
   const MapFeature* a = find_feature(*c_.features, f.feature_id);
   const MapFeature* b = find_feature(*c_.features, f.other_id);

@@ -150,6 +150,11 @@ class Problem final : public NonlinearProblem {
   /// theirs leaves free (coincidence_residual), re-evaluated at every
   /// linearisation: J = Nᵀ (B̃_a  −B̃_b).
   void coincide(int a, int b, double sigma);
+  /// A pose relation (a loop closure placed by the scans, where the features
+  /// paired leave a direction free): pose node `to` seen from pose node
+  /// `from`, planar, r = (x_from⁻¹ ⊕ x_to) − z over (x, y, θ) ~ N(0, C).
+  /// Reported as a coincidence (FactorKind::Coincidence: a loop closure).
+  void relate(int from, int to, const Eigen::Vector3d& z, const Eigen::Matrix3d& C);
   /// Loop closures recorded (NonlinearProblem::loop_closures).
   int loop_closures() const override { return loop_closures_; }
   /// Trajectory index of pose node `node`.
@@ -209,6 +214,7 @@ class Problem final : public NonlinearProblem {
   bool evaluate_motion(const Factor& f, FactorLinearization& out);
   void evaluate_linear(const Factor& f, FactorLinearization& out) const;
   bool evaluate_coincidence(const Factor& f, FactorLinearization& out) const;
+  bool evaluate_relation(const Factor& f, FactorLinearization& out) const;
 
   Context c_;
   int k_ = 0;

@@ -15,6 +15,9 @@
 
 namespace mspace::kernel {
 
+/// feature_id of a factor on no feature (a pose relation; ids start at 1).
+inline constexpr int kNoFeature = -1;
+
 struct Problem::Factor {
   FactorKind kind = FactorKind::Linear;
   bool live = false;    ///< observation: re-linearised in full (else its last linearisation)
@@ -30,7 +33,7 @@ struct Problem::Factor {
   int node = 0;
   std::vector<int> rows;  ///< the feature's state_idx when recorded
   int dim = 0;            ///< the feature's M-space dimension when recorded
-  // motion
+  // motion (and a pose relation: from, to, its value in m.v, covariance in m.C_v)
   int from = 0, to = 0;
   std::vector<OdometryIncrement> odometry;
   std::vector<std::size_t> odometry_records;  ///< trajectory index of each increment

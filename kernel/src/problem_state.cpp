@@ -286,6 +286,9 @@ void Problem::restore_state(const StateReader& in, const std::vector<MapFeature>
                                    f->node_base.size() == f->lin_nodes.size() &&
                                    f->row_base.size() == static_cast<Eigen::Index>(f->lin_rows.size()));
     if (!linearisation_ok) r.fail("factor " + std::to_string(i) + ": its linearisation has inconsistent sizes");
+    if (f->kind == FactorKind::Coincidence && f->feature_id == kNoFeature &&
+        (f->from >= f->to || f->m.v.size() != 3 || f->m.C_v.rows() != 3 || f->m.C_v.cols() != 3))
+      r.fail("factor " + std::to_string(i) + ": a pose relation must go forward and hold a planar pose and its covariance");
     if (f->kind == FactorKind::Motion && (f->from >= f->to || f->odometry.empty()))
       r.fail("factor " + std::to_string(i) + ": a motion factor must go forward over some odometry");
     if (f->live) {  // re-linearised through its feature: bind it again

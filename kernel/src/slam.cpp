@@ -258,6 +258,7 @@ bool Slam::step() {
   robot_truth_ = pose_search_ ? std::nullopt : robot_truth(data, ground_truth_sensor_, dofs_);
   if (problem_ && !data.readings.empty()) problem_->key_pose(trajectory_.size());
   stats_.seconds_predict += seconds_since(t0);
+  if (config_.association.loop_closing && config_.association.loop_scans) keep_scans(data);
 
   std::vector<ReadingWork> work;
   for (const SensorReading& reading : data.readings) process_reading(reading, work);

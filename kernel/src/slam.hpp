@@ -31,6 +31,7 @@
 #include "covariance_health.hpp"
 #include "evaluation.hpp"
 #include "loop_closing.hpp"
+#include "scan_evidence.hpp"
 #include "feature_bookkeeping.hpp"
 #include "mspace/estimator.hpp"
 #include "mspace/extractor.hpp"
@@ -104,6 +105,7 @@ struct RunStats {
   std::int64_t loop_ambiguous = 0;  ///< refused: another placement fitted nearly as well
   std::int64_t loop_unconfirmed = 0;  ///< found, then not found again by the next search with new features
   std::int64_t loop_merged = 0;     ///< features found to duplicate older ones
+  std::int64_t loop_scan_placed = 0;  ///< closures placed by the scans (association.loop_scans)
   /// With ground truth: every accepted closure checked — the robot's pose
   /// after it, relative to its poses when it last saw the old features it
   /// paired, against the true relative poses; a median disagreement of over
@@ -315,6 +317,16 @@ class Slam {
   /// The map-matching settings loop closing and the pose search share
   /// (association.loop_*, the gate's probability, the placement's σ bound).
   MapMatchOptions map_match_options() const;
+  /// A seeded closure's pose relation (problem.hpp, relate) from the old pose
+  /// node nearest to where T puts the robot to the current one.
+  void relate_to_old_pose(const PlanarMotion& T, const MapMatchHypothesis& h);
+  /// Keeps this step's range scans when association.loop_scans is on.
+  void keep_scans(const DataStep& data);
+  /// The recent scans (the last loop_local_path m) placed on the old ones
+  /// (over loop_min_gap_path m ago) within the window `o` about `here`
+  /// (scan_evidence.hpp); `field` receives the old scans' field.
+  ScanPlacement place_scans(const Eigen::Vector2d& here, const MapMatchOptions& o,
+                            std::unique_ptr<ScanField>& field, std::vector<Eigen::Vector2d>& local) const;
   /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
   bool relinearize(bool end_of_data);
   SensorView sensor_view(int sensor_index, double t) const;
@@ -402,8 +414,13 @@ class Slam {
     PlanarMotion motion;
     double sigma_translation = 0.0, sigma_rotation = 0.0;
     std::vector<int> local_ids;  ///< feature ids of the local features it paired
+    /// Placed by the scans (MapMatchHypothesis::seeded): a later search whose
+    /// scans place it again confirms it without new feature pairs.
+    bool seeded = false;
+    double path = 0.0;  ///< path_distance_ when it was found
   };
   PendingClosure pending_closure_;
+  std::vector<KeptScan> scans_;  ///< association.loop_scans: every range scan's end points
   StepObserver step_observer_;
   double source_load_seconds_ = 0.0;
 

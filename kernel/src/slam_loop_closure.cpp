@@ -31,14 +31,18 @@
 // one update, linearised where it stands (it cannot do better).
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <sstream>
+#include <unordered_set>
 
 #include <Eigen/Cholesky>
 
 #include "association.hpp"
 #include "loop_closing.hpp"
+#include "occupancy_grid.hpp"
 #include "problem.hpp"
+#include "scan_evidence.hpp"
 #include "slam.hpp"
 
 namespace mspace::kernel {
@@ -198,6 +202,138 @@ MapMatchOptions Slam::map_match_options() const {
   return o;
 }
 
+// Scan evidence (scan_evidence.hpp): end points 10 cm apart along a scan,
+// recent ones thinned to one per 15 cm cell, the old ones' field in 10 cm
+// cells with σ 15 cm (the laser's noise is a centimetre or two; the rest is
+// both maps' own distortion over loop_local_path m).
+constexpr double kScanPointSpacing = 0.10;  // m
+constexpr double kScanLocalCell = 0.25;     // m
+constexpr double kScanResolution = 0.10;    // m
+constexpr double kScanSigma = 0.15;         // m
+/// Old scans taken within this of the last one used are left out.
+constexpr double kScanKeyDistance = 0.2;    // m
+constexpr double kScanKeyTurn = 0.087;      // rad (5°)
+/// The recent end points are thinned further to at most this many (every k-th).
+constexpr std::size_t kScanMaxLocalPoints = 300;
+/// The scans search headings within ± this of the estimate at most (the
+/// features search the whole window): the cost of the search grows with
+/// it, and scan-matched odometry drifts far less in heading than this.
+constexpr double kScanMaxRotation = 0.35;  // rad (20°)
+constexpr double kScanRotationStep = 0.0175;  // rad (1°)
+/// What an end point costs where the old scans saw empty space.
+constexpr double kScanMiss = 0.5;
+/// The scans say something when their best placement explains this much.
+constexpr double kScanMinScore = 0.4;
+/// A feature placement scoring below this fraction of the scans' best is
+/// contradicted by them.
+constexpr double kScanAgreement = 0.8;
+/// The scans' best placement is unique when no clearly different one scores
+/// this fraction of it.
+constexpr double kScanUniqueRatio = 0.9;
+
+void Slam::keep_scans(const DataStep& data) {
+  for (const SensorReading& reading : data.readings) {
+    const auto sensor = std::find_if(sensors_.begin(), sensors_.end(),
+                                     [&](const SensorSlot& s) { return s.config.channel == reading.channel; });
+    if (sensor == sensors_.end() || !is_range_scan(reading.values)) continue;
+    KeptScan scan;
+    scan.record = trajectory_.size();
+    scan.path = path_distance_;
+    scan.origin = Eigen::Vector2f(static_cast<float>(sensor->config.mount[kX]), static_cast<float>(sensor->config.mount[kY]));
+    scan.points = scan_end_points(reading.values, sensor->config.mount, sensor->config.max_range, kScanPointSpacing);
+    for (const Eigen::Vector2f& p : scan.points) scan.range = std::max(scan.range, (p - scan.origin).norm());
+    if (!scan.points.empty()) scans_.push_back(std::move(scan));
+  }
+}
+
+ScanPlacement Slam::place_scans(const Eigen::Vector2d& here, const MapMatchOptions& o,
+                                std::unique_ptr<ScanField>& field, std::vector<Eigen::Vector2d>& local) const {
+  const AssociationConfig& a = config_.association;
+  const auto pose_of = [&](const KeptScan& s) {
+    const Pose6& x = s.record < trajectory_.size() ? trajectory_[s.record].pose : x_r_;
+    const double c = std::cos(x[kTheta]), sn = std::sin(x[kTheta]);
+    Eigen::Matrix2d R;
+    R << c, -sn, sn, c;
+    return std::pair{R, Eigen::Vector2d(x[kX], x[kY])};
+  };
+  local.clear();
+  std::unordered_set<std::int64_t> taken;
+  double local_radius = 0.0;
+  for (const KeptScan& s : scans_) {
+    if (s.path < path_distance_ - a.loop_local_path) continue;
+    const auto [R, t] = pose_of(s);
+    for (const Eigen::Vector2f& q : s.points) {
+      const Eigen::Vector2d p = R * q.cast<double>() + t;
+      const auto ix = static_cast<std::int64_t>(std::floor(p.x() / kScanLocalCell));
+      const auto iy = static_cast<std::int64_t>(std::floor(p.y() / kScanLocalCell));
+      if (!taken.insert(ix * 2000003 + iy).second) continue;
+      local.push_back(p);
+      local_radius = std::max(local_radius, (p - here).norm());
+    }
+  }
+  if (local.size() > kScanMaxLocalPoints) {
+    const double stride = static_cast<double>(local.size()) / static_cast<double>(kScanMaxLocalPoints);
+    std::vector<Eigen::Vector2d> kept;
+    for (std::size_t i = 0; i < kScanMaxLocalPoints; ++i) kept.push_back(local[static_cast<std::size_t>(i * stride)]);
+    local = std::move(kept);
+  }
+  std::vector<ScanRay> old;
+  const double reach = local_radius + o.max_translation + 3.0 * kScanSigma;
+  // Old scans from poses within kScanKeyDistance of the last one used add
+  // little: one in such a run is used.
+  Eigen::Vector3d last_used(std::nan(""), 0.0, 0.0);
+  for (const KeptScan& s : scans_) {
+    if (s.path > path_distance_ - a.loop_min_gap_path) break;  // (kept in the order of travel)
+    const auto [R, t] = pose_of(s);
+    const double heading = std::atan2(R(1, 0), R(0, 0));
+    if (std::isfinite(last_used.x()) && (t - last_used.head<2>()).norm() < kScanKeyDistance &&
+        std::abs(std::remainder(heading - last_used.z(), 2.0 * std::numbers::pi)) < kScanKeyTurn)
+      continue;
+    if ((t - here).norm() > reach + s.range) continue;
+    last_used << t, heading;
+    const Eigen::Vector2d from = R * s.origin.cast<double>() + t;
+    for (const Eigen::Vector2f& q : s.points) {
+      const Eigen::Vector2d p = R * q.cast<double>() + t;
+      if ((p - here).norm() <= reach) old.push_back({from, p});
+    }
+  }
+  field = std::make_unique<ScanField>(old, kScanResolution, kScanSigma, kScanMiss);
+  ScanSearchOptions so;
+  so.max_translation = o.max_translation;
+  so.max_rotation = std::min(o.max_rotation, kScanMaxRotation);
+  so.rotation_step = kScanRotationStep;
+  so.rival_ratio = kScanUniqueRatio;  // every rival that could make the best not unique
+  return field->search(local, here, so);
+}
+
+void Slam::relate_to_old_pose(const PlanarMotion& T, const MapMatchHypothesis& h) {
+  const int current = problem_->num_pose_nodes() - 1;
+  const Eigen::Vector2d placed = T.apply(Eigen::Vector2d(x_r_[kX], x_r_[kY]));
+  const double old_path = path_distance_ - config_.association.loop_min_gap_path;
+  int nearest = -1;
+  double best = std::numeric_limits<double>::infinity();
+  for (int node = 0; node < current; ++node) {
+    const std::size_t record = problem_->node_record(node);
+    if (record >= record_path_.size() || record_path_[record] > old_path) break;  // (nodes in the order of travel)
+    const Pose6 x = problem_->node_value(node);
+    const double d = (Eigen::Vector2d(x[kX], x[kY]) - placed).norm();
+    if (d < best) {
+      best = d;
+      nearest = node;
+    }
+  }
+  if (nearest < 0) return;
+  const Pose6 from = problem_->node_value(nearest);
+  const double c = std::cos(from[kTheta]), s = std::sin(from[kTheta]);
+  const Eigen::Vector2d d = placed - Eigen::Vector2d(from[kX], from[kY]);
+  const Eigen::Vector3d z(c * d.x() + s * d.y(), -s * d.x() + c * d.y(), wrap_angle(x_r_[kTheta] + T.theta - from[kTheta]));
+  const Eigen::Vector3d sigma(h.sigma_translation, h.sigma_translation, h.sigma_rotation);
+  problem_->relate(nearest, current, z, sigma.cwiseProduct(sigma).asDiagonal());
+  log_->debug("step ", step_, ": pose relation to the pose node of step record ", problem_->node_record(nearest), " (",
+              best, " m from where the scans put the robot), sigma ", h.sigma_translation, " m, ",
+              h.sigma_rotation * 180.0 / std::numbers::pi, " deg");
+}
+
 void Slam::close_loops(const DataStep& data) {
   const AssociationConfig& a = config_.association;
   if (path_distance_ - last_loop_attempt_path_ < 0.1 * a.loop_local_path) return;
@@ -237,6 +373,36 @@ void Slam::close_loops(const DataStep& data) {
   std::vector<FeatureShape> local, old;
   for (int i : local_idx) local.push_back(estimated_shape(i));
   for (int i : nearby) old.push_back(estimated_shape(i));
+  // The scans' own placement (association.loop_scans): a feature placement
+  // they contradict is refused, and a placement they find unique is tried
+  // as a hypothesis of its own (loop_closing.hpp, dense evidence).
+  std::unique_ptr<ScanField> field;
+  std::vector<Eigen::Vector2d> scan_points;
+  ScanPlacement scans;
+  if (a.loop_scans) {
+    scans = place_scans(here, o, field, scan_points);
+    if (scans.found && scans.score >= kScanMinScore) {
+      o.dense_score = [&](const PlanarMotion& T) { return field->score(scan_points, T); };
+      o.dense_floor = kScanAgreement * scans.score;
+      if (scans.rival_score < kScanUniqueRatio * scans.score) o.seeds.push_back(scans.best);
+      // The scans' placement is good to a few σ of their field and a rotation step or two.
+      o.seed_tolerance_translation = 3.0 * kScanSigma;
+      o.seed_tolerance_rotation = 2.0 * kScanRotationStep;
+    }
+    if (log_->enabled(LogLevel::Debug)) {
+      std::vector<double> seen;
+      for (const FeatureShape& f : old) seen.push_back(features_[static_cast<std::size_t>(f.feature)].created_path);
+      const auto truth = disagreement_with_ground_truth(scans.best, seen, data);
+      std::ostringstream what;
+      what.precision(3);
+      what << "step " << step_ << ": scans placed " << scan_points.size() << " end points (" << scans.best.t.norm()
+           << " m, " << scans.best.theta * 180.0 / std::numbers::pi << " deg), score " << scans.score
+           << ", best clearly different placement " << scans.rival_score << " (" << scans.leaves
+           << " placements scored)";
+      if (truth) what << "; ground truth: " << truth->first << " m, " << truth->second * 180.0 / std::numbers::pi << " deg off";
+      log_->debug(what.str());
+    }
+  }
   const MapMatch match = match_local_map(local, old, here, o);
   // Whether placement h agrees with the waiting one p: the robot's position
   // and heading under both within 3σ of their difference (plus the local
@@ -253,6 +419,13 @@ void Slam::close_loops(const DataStep& data) {
     bool keep = false;
     if (pending_closure_.active && match.reason.rfind("ambiguous", 0) != 0) {
       keep = match.best.pairs.empty() || agrees(pending_closure_, match.best);
+      // A placement the scans made stands while the scans keep placing the
+      // local map there, whatever the features' best guess.
+      if (pending_closure_.seeded && scans.found) {
+        MapMatchHypothesis by_scans;
+        by_scans.motion = scans.best;
+        keep = keep || agrees(pending_closure_, by_scans);
+      }
     }
     if (!keep) pending_closure_ = PendingClosure{};
     if (match.reason.rfind("ambiguous", 0) == 0) {
@@ -283,6 +456,8 @@ void Slam::close_loops(const DataStep& data) {
       fresh = std::any_of(paired_ids.begin(), paired_ids.end(), [&](int id) {
         return std::find(p.local_ids.begin(), p.local_ids.end(), id) == p.local_ids.end();
       });
+      // Scans placed it again after half a local map of new scans.
+      fresh = fresh || (p.seeded && match.best.seeded && path_distance_ - p.path >= 0.5 * a.loop_local_path);
       if (!same) {
         ++stats_.loop_unconfirmed;
         log_->info("step ", step_, ": map matching's placement of ", match.best.pairs.size(),
@@ -295,7 +470,7 @@ void Slam::close_loops(const DataStep& data) {
       // keeps the first one's features) and wait for the next search.
       if (!same)
         pending_closure_ = PendingClosure{true, match.best.motion, match.best.sigma_translation,
-                                          match.best.sigma_rotation, paired_ids};
+                                          match.best.sigma_rotation, paired_ids, match.best.seeded, path_distance_};
       if (log_->enabled(LogLevel::Debug))
         log_->debug("step ", step_, ": map matching placed ", match.best.pairs.size(), " of ", local.size(),
                     " local features (", match.best.motion.t.norm(), " m, ",
@@ -319,6 +494,7 @@ void Slam::close_loops(const DataStep& data) {
          << local.size() << " features of the last " << a.loop_local_path << " m are older ones last seen "
          << span << " m of travel ago; correction " << T.t.norm() << " m, " << T.theta * 180.0 / std::numbers::pi
          << " deg (about the robot; best other placement pairs " << match.rival_matches << ")";
+    if (match.best.seeded) what << "; placed by the scans (score " << match.best.dense_score << ")";
     log_->info(what.str());
   }
   if (log_->enabled(LogLevel::Debug)) {
@@ -334,6 +510,7 @@ void Slam::close_loops(const DataStep& data) {
     log_->debug("step ", step_, ": loop closure pairs (local -> old):", pairs.str());
   }
   ++stats_.loop_closures;
+  if (match.best.seeded) ++stats_.loop_scan_placed;
   stats_.loop_merged += static_cast<std::int64_t>(match.best.pairs.size());
   {
     std::vector<double> seen;
@@ -343,6 +520,11 @@ void Slam::close_loops(const DataStep& data) {
   }
 
   if (problem_) {
+    // Placed by the scans with a direction the pairs leave free (a corridor):
+    // the current pose node relative to the old one nearest to where the
+    // scans put the robot, with the placement's σ — else the odometry would
+    // pull the free direction back where the drift had it.
+    if (match.best.seeded && !match.best.determined) relate_to_old_pose(T, match.best);
     // A first guess: the trajectory and the features since the loop's start
     // moved by their share of the correction.
     std::vector<std::pair<int, PlanarMotion>> moves;

@@ -82,6 +82,16 @@ std::vector<FeatureShape> room(Eigen::Vector2d origin) {
   return s;
 }
 
+/// A corridor: two pairs of long parallel walls (2 m apart) with sliding ends, a gap between the pairs.
+std::vector<FeatureShape> corridor() {
+  std::vector<FeatureShape> old;
+  for (double x0 : {0.0, 12.0}) {
+    old.push_back(segment({x0, 0}, {x0 + 10, 0}, false, false));
+    old.push_back(segment({x0 + 10, 2}, {x0, 2}, false, false));
+  }
+  return old;
+}
+
 /// The motion that undoes `T` (both about the same pivot).
 PlanarMotion inverse(const PlanarMotion& T) {
   PlanarMotion inv{-T.theta, Eigen::Vector2d::Zero(), T.pivot};
@@ -160,11 +170,7 @@ TEST(MapMatching, RefusesParallelWallsThatLeaveTheMotionFree) {
   // A corridor: two long parallel walls with sliding ends fix the rotation
   // and the offset across it, never the position along it.
   std::mt19937 rng(5);
-  std::vector<FeatureShape> old;
-  for (double x0 : {0.0, 12.0}) {
-    old.push_back(segment({x0, 0}, {x0 + 10, 0}, false, false));
-    old.push_back(segment({x0 + 10, 2}, {x0, 2}, false, false));
-  }
+  const std::vector<FeatureShape> old = corridor();
   const std::vector<FeatureShape> local =
       moved({old[0], old[1], old[2], old[3]}, PlanarMotion{0.02, Eigen::Vector2d(0.7, 0.3), {5, 1}}, 0.005, rng);
   MapMatchOptions o;
@@ -172,6 +178,71 @@ TEST(MapMatching, RefusesParallelWallsThatLeaveTheMotionFree) {
   const MapMatch m = match_local_map(local, old, {5, 1}, o);
   EXPECT_FALSE(m.accepted);
   EXPECT_NE(m.reason.find("does not fix"), std::string::npos) << m.reason;
+}
+
+// Other evidence (MapMatchOptions::seeds, dense_score; Slam's scans): a
+// seed at the true placement of the same corridor is accepted with the
+// position along the corridor the seed gave, which the walls leave free.
+TEST(MapMatching, ASeedFixesWhatParallelWallsLeaveFree) {
+  std::mt19937 rng(5);
+  const std::vector<FeatureShape> old = corridor();
+  const PlanarMotion drift{0.02, Eigen::Vector2d(0.7, 0.3), {5, 1}};
+  const std::vector<FeatureShape> local = moved({old[0], old[1]}, drift, 0.005, rng);
+  const PlanarMotion want = inverse(drift);
+  MapMatchOptions o;
+  o.min_matches = 2;
+  // The seed is off by 4 cm and 0.3° (a scan search's grid); the dense
+  // score peaks at the seed.
+  PlanarMotion seed = want;
+  seed.t += Eigen::Vector2d(0.04, 0.0);
+  seed.theta += 0.005;
+  o.seeds = {seed};
+  o.dense_score = [&](const PlanarMotion& T) { return 1.0 - (T.t - seed.t).norm(); };
+  o.dense_floor = 0.8;
+  const MapMatch m = match_local_map(local, old, {5, 1}, o);
+  ASSERT_TRUE(m.accepted) << m.reason;
+  EXPECT_TRUE(m.best.seeded);
+  EXPECT_FALSE(m.best.determined);
+  EXPECT_EQ(m.best.pairs.size(), 2u);
+  // Across the corridor and in heading the walls refine the seed; along it the seed stands.
+  EXPECT_NEAR(m.best.motion.theta, want.theta, 0.002);
+  EXPECT_NEAR(m.best.motion.t.x(), seed.t.x(), 0.02);
+  EXPECT_NEAR((m.best.motion.apply(Eigen::Vector2d(5, 1)) - want.apply(Eigen::Vector2d(5, 1))).y(), 0.0, 0.02);
+  // A seed turned 3° from the truth: the walls turn it back, further than
+  // seed_tolerance_rotation (2°) — they disagree with the seed's evidence,
+  // so it is dropped; with a looser tolerance the same seed is accepted.
+  PlanarMotion turned = want;
+  turned.theta += 3.0 * std::numbers::pi / 180.0;
+  o.seeds = {turned};
+  o.dense_score = [&](const PlanarMotion& T) { return 1.0 - (T.t - turned.t).norm(); };
+  ASSERT_NEAR(o.seed_tolerance_rotation, 0.035, 1e-12);
+  EXPECT_FALSE(match_local_map(local, old, {5, 1}, o).accepted);
+  o.seed_tolerance_rotation = 0.1;
+  const MapMatch loose = match_local_map(local, old, {5, 1}, o);
+  ASSERT_TRUE(loose.accepted) << loose.reason;
+  EXPECT_NEAR(loose.best.motion.theta, want.theta, 0.002);
+  o.seed_tolerance_rotation = 0.035;
+  // Without the seed: refused, as in the test above.
+  o.seeds.clear();
+  EXPECT_FALSE(match_local_map(local, old, {5, 1}, o).accepted);
+}
+
+// A placement the features alone accept is refused when the other evidence
+// scores it below dense_floor, and it is no rival of one it does not contradict.
+TEST(MapMatching, OtherEvidenceVetoesAPlacementItContradicts) {
+  std::mt19937 rng(3);
+  const std::vector<FeatureShape> old = room({0, 0});
+  const PlanarMotion drift{0.05, Eigen::Vector2d(1.0, -0.5), {3.5, 2.0}};
+  const std::vector<FeatureShape> local = moved(old, drift, 0.01, rng);
+  MapMatchOptions o;
+  o.max_translation = 4.0;
+  ASSERT_TRUE(match_local_map(local, old, drift.pivot, o).accepted);
+  const PlanarMotion want = inverse(drift);
+  o.dense_score = [&](const PlanarMotion& T) { return (T.t - want.t).norm() < 0.2 ? 0.3 : 1.0; };
+  o.dense_floor = 0.8;
+  const MapMatch m = match_local_map(local, old, drift.pivot, o);
+  EXPECT_FALSE(m.accepted);
+  EXPECT_NE(m.reason.find("contradicts"), std::string::npos) << m.reason;
 }
 
 TEST(MapMatching, PairsOnlyCopiesThatOverlapTheSameWayRound) {

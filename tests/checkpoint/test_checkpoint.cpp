@@ -251,7 +251,7 @@ bool have_victoria_park() {
 /// The generated ring of the loop-closing runs, on wheel odometry, with
 /// loop_closing on: checkpoints at each of `checkpoints`, resumed to `stop_at`.
 void expect_loop_closing_resume(const std::string& estimator, const std::vector<std::int64_t>& checkpoints,
-                                std::int64_t stop_at) {
+                                std::int64_t stop_at, bool scans = false) {
   sim_building::GeneratorSettings settings;
   settings.laser.gap_probability = 0.003;
   settings.laser.gap_min = 40.0;
@@ -259,9 +259,10 @@ void expect_loop_closing_resume(const std::string& estimator, const std::vector<
   const fs::path dir = scratch("building");
   sim_building::write_data_set(sim_building::simulate(settings), dir);
   setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
-  const auto edit = [](RunConfig& config) {
+  const auto edit = [scans](RunConfig& config) {
     config.source.params.set("odometry", std::string("wheel"));
     config.association.loop_closing = true;
+    config.association.loop_scans = scans;
   };
   for (std::int64_t at : checkpoints) {
     SCOPED_TRACE("checkpoint at step " + std::to_string(at));
@@ -276,6 +277,12 @@ TEST(Checkpoint, LoopClosingEkf) { expect_loop_closing_resume("ekf", {3000, 3200
 // at step 3203 here (one search refused as ambiguous at 3194): checkpoints
 // before the closure and after it (the coincidence factors are in PROB).
 TEST(Checkpoint, LoopClosingSmoother) { expect_loop_closing_resume("smoother", {3150, 3220}, 3248); }
+
+// With association.loop_scans the kept scans (their end points, poses'
+// records and paths) are run state: a resumed run searches the same scans.
+TEST(Checkpoint, LoopClosingSmootherWithScans) {
+  expect_loop_closing_resume("smoother", {3150, 3220}, 3248, true);
+}
 
 // The smoother: its running EKF and triggers (PSTA) and the kernel's
 // nonlinear problem (PROB: pose nodes, motion, observation, extension and

@@ -41,7 +41,9 @@
 //                linearisation — see docs/writing-an-estimator.md);
 //   coincidence  two features are one object (a loop closure by map
 //                matching): the difference of their coordinates with their
-//                symmetry directions projected out, re-evaluated in full.
+//                symmetry directions projected out, re-evaluated in full; or
+//                a pose relation (a closure the range scans placed): one
+//                pose node seen from an older one, planar, re-evaluated in full.
 #pragma once
 
 #include <cstdint>
