@@ -203,9 +203,10 @@ MapMatchOptions Slam::map_match_options() const {
 }
 
 // Scan evidence (scan_evidence.hpp): end points 10 cm apart along a scan,
-// recent ones thinned to one per 15 cm cell, the old ones' field in 10 cm
-// cells with σ 15 cm (the laser's noise is a centimetre or two; the rest is
-// both maps' own distortion over loop_local_path m).
+// the recent ones thinned to one per 25 cm cell (at most 300), the old ones'
+// field in 10 cm cells with σ 15 cm (the laser's noise is a centimetre or
+// two; the rest is both maps' own distortion over loop_local_path m). All
+// stated, not searched (README, "Range scans as evidence").
 constexpr double kScanPointSpacing = 0.10;  // m
 constexpr double kScanLocalCell = 0.25;     // m
 constexpr double kScanResolution = 0.10;    // m
