@@ -668,7 +668,8 @@ bool linearize_coincidence(const MapFeature& a, const MapFeature& b, Eigen::Vect
 void Problem::relate(int from, int to, const Eigen::Vector3d& z, const Eigen::Matrix3d& C) {
   if (from < 0 || to <= from || to >= num_pose_nodes())
     throw std::invalid_argument("problem: a pose relation needs two pose nodes, the older first");
-  if (!z.allFinite() || !C.allFinite() || C.ldlt().info() != Eigen::Success || !C.ldlt().isPositive())
+  // (LLT: a Cholesky factor exists only for a positive definite C; LDLT also takes semi-definite ones.)
+  if (!z.allFinite() || !C.allFinite() || C.llt().info() != Eigen::Success)
     throw std::invalid_argument("problem: a pose relation needs a finite value and a positive definite covariance");
   for (int dof : {kX, kY, kTheta})
     if (std::find(c_.dofs.begin(), c_.dofs.end(), dof) == c_.dofs.end())

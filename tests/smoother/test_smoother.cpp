@@ -118,12 +118,12 @@ struct JacobianCheck {
   std::map<FactorKind, int> checked;
 };
 
-JacobianCheck check_jacobians(Problem& p, int max_factors) {
+JacobianCheck check_jacobians(Problem& p, int max_factors, int first = 0) {
   JacobianCheck out;
   const int n = p.num_factors();
-  const int stride = std::max(1, n / max_factors);
+  const int stride = std::max(1, (n - first) / max_factors);
   constexpr double h = 1e-6;
-  for (int i = 0; i < n; i += stride) {
+  for (int i = first; i < n; i += stride) {
     FactorLinearization lin, plus, minus;
     if (!p.linearize(i, lin)) continue;
     const Eigen::MatrixXd J = lin.J;
@@ -172,6 +172,29 @@ TEST_F(Smoother, FactorJacobiansMatchNumericDifferencesOnPoints) {
   EXPECT_GT(r.checked[FactorKind::Observation], 10);
   EXPECT_GT(r.checked[FactorKind::Linear], 0);  // the points' extension priors
   EXPECT_LT(r.worst, 1e-4);
+}
+
+// A pose relation (a loop closure the range scans placed, Problem::relate):
+// its Jacobian over both pose nodes' planar coordinates, with the nodes far
+// apart and turned, against central differences.
+TEST_F(Smoother, PoseRelationJacobianMatchesNumericDifferences) {
+  RunConfig c = sim("smoother");
+  c.max_steps = 400;
+  Slam slam(c, registry_);
+  while (slam.step()) {
+  }
+  Problem& p = *slam.problem();
+  const int last = p.num_pose_nodes() - 1;
+  ASSERT_GT(last, 300);
+  const int first = p.num_factors();
+  p.relate(10, last, Eigen::Vector3d(3.0, -2.0, 0.7), Eigen::Vector3d(0.04, 0.09, 0.001).asDiagonal());
+  p.relate(last / 2, last - 1, Eigen::Vector3d(-1.0, 0.5, -2.9), Eigen::Matrix3d::Identity() * 0.01);
+  const JacobianCheck r = check_jacobians(p, 10, first);
+  EXPECT_EQ(r.checked.at(FactorKind::Coincidence), 2);
+  EXPECT_LT(r.worst, 1e-6);
+  // Bad relations are refused with a reason.
+  EXPECT_THROW(p.relate(last, 10, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity()), std::invalid_argument);
+  EXPECT_THROW(p.relate(1, 2, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero()), std::invalid_argument);
 }
 
 TEST_F(Smoother, FactorJacobiansMatchNumericDifferencesOnWallsWithCorners) {
