@@ -151,7 +151,7 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
                            static_cast<double>(s.loop_ambiguous), static_cast<double>(s.loop_merged),
                            static_cast<double>(s.loop_checked), static_cast<double>(s.loop_false),
                            s.loop_worst_disagreement, s.seconds_loops, static_cast<double>(s.loop_unconfirmed),
-                           static_cast<double>(s.loop_scan_placed)}));
+                           static_cast<double>(s.loop_scan_placed), static_cast<double>(s.loop_wrong_pairs)}));
   const PendingClosure& pending = pending_closure_;
   run.put("loop_pending", row_of({pending.active ? 1.0 : 0.0, pending.motion.theta, pending.motion.t.x(),
                                   pending.motion.t.y(), pending.motion.pivot.x(), pending.motion.pivot.y(),
@@ -286,7 +286,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     const Eigen::MatrixXd& seconds = get_state(run, "seconds", 1, 7, "run state");
     const Eigen::MatrixXd& nees = get_state(run, "nees", -1, 1, "run state");
     const Eigen::MatrixXd& association = get_state(run, "association", 1, 4, "run state");
-    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 13, "run state");
+    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 14, "run state");
     const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, 10, "run state");
     const Eigen::MatrixXd& pending_ids = get_state(run, "loop_pending_ids", -1, 1, "run state");
     const Eigen::MatrixXd& scan_index = get_state(run, "loop_scans", -1, 6, "run state");
@@ -371,6 +371,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     s.seconds_loops = loops(0, 10);
     s.loop_unconfirmed = integer_at(loops, 11, 0, 1e15, "loop_unconfirmed");
     s.loop_scan_placed = integer_at(loops, 12, 0, 1e15, "loop_scan_placed");
+    s.loop_wrong_pairs = integer_at(loops, 13, 0, 1e15, "loop_wrong_pairs");
 
     // The nonlinear problem (after the estimator, whose rows it checks; its
     // live factors bind to the restored features).

@@ -662,6 +662,21 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
 
 }  // namespace
 
+std::optional<double> distance_apart(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
+                                     const PlanarMotion& b_motion) {
+  if (a.layout == nullptr || b.layout == nullptr) return std::nullopt;
+  const auto move = [](const FeatureShape& f, const PlanarMotion& T) {
+    FeatureShape m = f;
+    m.x = T.apply(*f.layout, f.x);
+    if (f.free.cols() > 0) m.free = T.rotate(*f.layout, f.free);
+    m.cov.resize(0, 0);
+    return m;
+  };
+  CoincidenceResidual r;
+  if (!coincidence_residual(move(a, a_motion), move(b, b_motion), PlanarMotion{}, 0.0, r)) return std::nullopt;
+  return r.r.lpNorm<Eigen::Infinity>();
+}
+
 MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,
                          const Eigen::Vector2d& pivot, const MapMatchOptions& options) {
   int largest = 0;

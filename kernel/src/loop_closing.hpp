@@ -39,6 +39,7 @@
 
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -89,6 +90,16 @@ struct CoincidenceResidual {
 /// False when nothing is left to compare (m = 0) or the layouts differ.
 bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const PlanarMotion& T, double floor_sigma,
                           CoincidenceResidual& out);
+
+/// How far apart two shapes are once each is moved by its own motion — for
+/// ground-truth checks, each feature taken to the true frame through a pose
+/// that saw it (G = gt ∘ est⁻¹ there): its estimate relative to that pose is
+/// local, so a map's global distortion cancels, and two copies of one
+/// object land on each other. The largest |residual| of the pair (m, the
+/// symmetry directions projected out; e.g. two parallel walls 2 m apart:
+/// 2); nothing when the shapes cannot be compared.
+std::optional<double> distance_apart(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
+                                     const PlanarMotion& b_motion);
 
 struct MapMatchOptions {
   double max_translation = 10.0;    ///< m: the search window's radius about the current estimate

@@ -411,6 +411,7 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
       y << YAML::Key << "checked_against_ground_truth" << YAML::Value << st.loop_checked;
       y << YAML::Key << "false_closures" << YAML::Value << st.loop_false;
       y << YAML::Key << "worst_disagreement_m" << YAML::Value << st.loop_worst_disagreement;
+      y << YAML::Key << "wrong_associations" << YAML::Value << st.loop_wrong_pairs;
     }
     y << YAML::EndMap;
   }
@@ -580,7 +581,8 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
        << (slam.config().association.loop_scans ? ", " + std::to_string(st.loop_scan_placed) + " placed by the scans" : "");
   if (st.loop_checked > 0)
     os << "; against the ground truth " << st.loop_false << " of " << st.loop_checked
-       << " false (worst disagreement " << st.loop_worst_disagreement << " m)";
+       << " false (worst disagreement " << st.loop_worst_disagreement << " m), " << st.loop_wrong_pairs
+       << " pairing wrong objects";
   if (slam.config().association.loop_closing) os << "\n";
   os << "  state dimension " << s.state_dimension << "\n";
   for (const auto& [type, by_dim] : s.features_by_dim) {

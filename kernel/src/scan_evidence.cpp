@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <limits>
 #include <queue>
 
 namespace mspace::kernel {
@@ -76,8 +77,12 @@ ScanField::ScanField(const std::vector<ScanRay>& old_rays, double resolution, do
       seen_empty[cell_index(static_cast<int>(c.x()), static_cast<int>(c.y()))] = 1;
     }
   }
+  // The nearest old end point of every cell within reach (squared distance),
+  // then the field: exp is monotonic, so exp(−min d²/2σ²) is the maximum
+  // over the end points, one exp per cell.
   const int r = static_cast<int>(std::ceil(reach / resolution));
   const double inv2s2 = 1.0 / (2.0 * sigma * sigma);
+  std::vector<double> nearest(field.size(), std::numeric_limits<double>::infinity());
   for (const ScanRay& ray : old_rays) {
     const Eigen::Vector2d& p = ray.to;
     const Eigen::Vector2d c = (p - origin_) / resolution;
@@ -85,14 +90,16 @@ ScanField::ScanField(const std::vector<ScanRay>& old_rays, double resolution, do
     for (int j = std::max(0, cj - r); j <= std::min(height_ - 1, cj + r); ++j)
       for (int i = std::max(0, ci - r); i <= std::min(width_ - 1, ci + r); ++i) {
         const Eigen::Vector2d centre = origin_ + resolution * Eigen::Vector2d(i + 0.5, j + 0.5);
-        const double d2 = (centre - p).squaredNorm();
-        if (d2 > reach * reach) continue;
-        float& v = field[cell_index(i, j)];
-        v = std::max(v, static_cast<float>(std::exp(-d2 * inv2s2)));
+        double& d2 = nearest[cell_index(i, j)];
+        d2 = std::min(d2, (centre - p).squaredNorm());
       }
   }
-  for (std::size_t k = 0; k < field.size(); ++k)
-    if (field[k] == 0.0f && seen_empty[k]) field[k] = static_cast<float>(-miss);
+  for (std::size_t k = 0; k < field.size(); ++k) {
+    if (nearest[k] <= reach * reach)
+      field[k] = static_cast<float>(std::exp(-nearest[k] * inv2s2));
+    else if (seen_empty[k])
+      field[k] = static_cast<float>(-miss);
+  }
   levels_.push_back(std::move(field));
   // Level h: the maximum over 2^h × 2^h cells from (i, j) up, from level
   // h − 1's four blocks of half the side.

@@ -113,6 +113,12 @@ struct RunStats {
   std::int64_t loop_checked = 0;
   std::int64_t loop_false = 0;
   double loop_worst_disagreement = 0.0;  ///< m
+  /// With ground truth: closures most of whose pairs are not the same
+  /// object (each feature taken to the true frame through the pose it was
+  /// created at; slam_loop_closure.cpp, pairs_against_ground_truth). A false
+  /// closure by the pose check above may still pair the right objects: the
+  /// old map there was distorted; this counts wrong associations.
+  std::int64_t loop_wrong_pairs = 0;
   double seconds_predict = 0.0;
   double seconds_extract = 0.0;  ///< sensors' extractors (per sensor in the health reports)
   double seconds_associate = 0.0;  ///< gating, selection and keeping the spatial index in step
@@ -306,6 +312,16 @@ class Slam {
   std::optional<std::pair<double, double>> disagreement_with_ground_truth(const PlanarMotion& T,
                                                                          const std::vector<double>& seen_paths,
                                                                          const DataStep& data) const;
+  /// How many pairs of a closure are not the same object by the ground truth
+  /// (and how many could be checked): every feature is taken to the true
+  /// frame through the pose it was created at, G = gt ∘ est⁻¹ at that
+  /// record — its estimate relative to that pose is local, so the map's
+  /// global distortion cancels — and a pair whose coincidence residual
+  /// (symmetry directions projected out) exceeds 0.5 m somewhere is wrong.
+  std::optional<std::pair<int, int>> pairs_against_ground_truth(const MapMatchHypothesis& h,
+                                                                const std::vector<FeatureShape>& local,
+                                                                const std::vector<FeatureShape>& old,
+                                                                const DataStep& data) const;
   /// For the debug log of a refused search: how far its best placement and the estimate are from the truth.
   std::string ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& old,
                                    const DataStep& data) const;

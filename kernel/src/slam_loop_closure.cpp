@@ -145,6 +145,52 @@ std::optional<std::pair<double, double>> Slam::disagreement_with_ground_truth(
   return std::pair{median(position), median(heading)};
 }
 
+std::optional<std::pair<int, int>> Slam::pairs_against_ground_truth(const MapMatchHypothesis& h,
+                                                                    const std::vector<FeatureShape>& local,
+                                                                    const std::vector<FeatureShape>& old,
+                                                                    const DataStep& data) const {
+  if (!data.ground_truth || ground_truth_.empty()) return std::nullopt;
+  // The planar motion that takes the estimated frame at the record where
+  // `path` was reached to the true one: p ↦ R(θ_gt − θ_est)(p − t_est) + t_gt.
+  const auto to_truth = [&](double path) -> std::optional<PlanarMotion> {
+    const auto then = std::lower_bound(record_path_.begin(), record_path_.end(), path);
+    if (then == record_path_.end()) return std::nullopt;
+    const StampedPose& est = trajectory_[static_cast<std::size_t>(then - record_path_.begin())];
+    const auto gt = std::lower_bound(ground_truth_.begin(), ground_truth_.end(), est.t,
+                                     [](const StampedPose& g, double t) { return g.t < t; });
+    if (gt == ground_truth_.end() || std::abs(gt->t - est.t) > 1e-6) return std::nullopt;
+    const Eigen::Vector2d t_est(est.pose[kX], est.pose[kY]), t_gt(gt->pose[kX], gt->pose[kY]);
+    return PlanarMotion{wrap_angle(gt->pose[kTheta] - est.pose[kTheta]), t_gt - t_est, t_est};
+  };
+  int wrong = 0, checked = 0;
+  std::ostringstream residuals;
+  residuals.precision(2);
+  for (const auto& [li, oi] : h.pairs) {
+    const FeatureShape& a = local[static_cast<std::size_t>(li)];
+    const FeatureShape& b = old[static_cast<std::size_t>(oi)];
+    const MapFeature& fa = features_[static_cast<std::size_t>(a.feature)];
+    const MapFeature& fb = features_[static_cast<std::size_t>(b.feature)];
+    // Through the pose that created each and through the one that last saw
+    // it (a feature re-observed from elsewhere may have been moved): the
+    // pair is the same object when either says so.
+    double worst = std::numeric_limits<double>::infinity();
+    for (const bool last_seen : {false, true}) {
+      const auto Ga = to_truth(last_seen ? fa.last_seen_path : fa.created_path);
+      const auto Gb = to_truth(last_seen ? fb.last_seen_path : fb.created_path);
+      if (!Ga || !Gb) continue;
+      if (const auto d = distance_apart(a, *Ga, b, *Gb)) worst = std::min(worst, *d);
+    }
+    if (!std::isfinite(worst)) continue;
+    ++checked;
+    residuals << " " << worst;
+    if (worst > 0.5) ++wrong;
+  }
+  if (log_->enabled(LogLevel::Debug))
+    log_->debug("step ", step_, ": the pairs' worst residuals in the true frame (m):", residuals.str());
+  if (checked == 0) return std::nullopt;
+  return std::pair{wrong, checked};
+}
+
 void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<double>& seen_paths,
                                       const DataStep& data) {
   const auto off = disagreement_with_ground_truth(T, seen_paths, data);
@@ -402,6 +448,22 @@ void Slam::close_loops(const DataStep& data) {
            << ", best clearly different placement " << scans.rival_score << " (" << scans.leaves
            << " placements scored)";
       if (truth) what << "; ground truth: " << truth->first << " m, " << truth->second * 180.0 / std::numbers::pi << " deg off";
+      // Against the old scans taken within 2 m of where the placement puts
+      // the robot: the old map may hold several passes that disagree.
+      const auto near_placed = [&](const PlanarMotion& T) {
+        const Eigen::Vector2d placed = T.apply(here);
+        std::vector<double> paths;
+        for (const KeptScan& s : scans_) {
+          if (s.path > path_distance_ - a.loop_min_gap_path) break;
+          if (s.record >= trajectory_.size()) continue;
+          const Pose6& x = trajectory_[s.record].pose;
+          if ((Eigen::Vector2d(x[kX], x[kY]) - placed).norm() < 2.0) paths.push_back(s.path);
+        }
+        return disagreement_with_ground_truth(T, paths, data);
+      };
+      if (const auto local_truth = near_placed(scans.best))
+        what << "; against the old scans there: " << local_truth->first << " m, "
+             << local_truth->second * 180.0 / std::numbers::pi << " deg off";
       log_->debug(what.str());
     }
   }
@@ -519,6 +581,17 @@ void Slam::close_loops(const DataStep& data) {
     for (const auto& [li, oi] : match.best.pairs)
       seen.push_back(features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)].created_path);
     check_against_ground_truth(T, seen, data);
+    if (const auto by_pairs = pairs_against_ground_truth(match.best, local, old, data)) {
+      const auto [wrong, checked] = *by_pairs;
+      if (2 * wrong > checked) {
+        ++stats_.loop_wrong_pairs;
+        log_->warn("step ", step_, ": ", wrong, " of the closure's ", checked,
+                   " pairs are not the same object by the ground truth: a wrong association");
+      } else if (log_->enabled(LogLevel::Debug)) {
+        log_->debug("step ", step_, ": ", checked - wrong, " of the closure's ", checked,
+                    " pairs are the same object by the ground truth");
+      }
+    }
   }
 
   if (problem_) {

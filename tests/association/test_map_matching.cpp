@@ -284,4 +284,29 @@ TEST(MapMatching, FindsNothingWhereThereIsNothing) {
   EXPECT_FALSE(m.accepted) << m.best_matches << " matches";
 }
 
+// The ground-truth check of a closure's pairs (distance_apart): each feature
+// is moved to the true frame by its own motion. Two copies of one wall,
+// mapped in frames that have drifted 3 m and 10° apart, land on each other;
+// a wall and the parallel one across a 2 m corridor stay 2 m apart; a copy
+// that slid along the wall (its ends unmeasured) is still the same wall.
+TEST(MapMatching, TheTruthCheckSeesObjectsNotTheMapsDistortion) {
+  const FeatureShape wall = segment({0, 0}, {6, 0}, true, false);
+  const FeatureShape across = segment({0, 2}, {6, 2}, true, false);
+  const PlanarMotion identity{};
+  // The same wall as a drifted frame sees it: est = D(true), so true = D⁻¹(est).
+  const PlanarMotion drift{0.1745, Eigen::Vector2d(3.0, -1.0), Eigen::Vector2d(1.0, 1.0)};
+  std::mt19937 rng(3);
+  const FeatureShape drifted = moved({wall}, drift, 0.0, rng).front();
+  const auto same = distance_apart(wall, identity, drifted, inverse(drift));
+  ASSERT_TRUE(same.has_value());
+  EXPECT_LT(*same, 1e-9);
+  // Without undoing the drift the copies are metres apart: the check would see the distortion.
+  EXPECT_GT(*distance_apart(wall, identity, drifted, identity), 1.0);
+  const auto other = distance_apart(wall, identity, across, identity);
+  ASSERT_TRUE(other.has_value());
+  EXPECT_NEAR(*other, 2.0, 1e-9);
+  const FeatureShape slid = segment({0, 0}, {4, 0}, true, false);
+  EXPECT_LT(*distance_apart(wall, identity, slid, identity), 1e-9);
+}
+
 }  // namespace

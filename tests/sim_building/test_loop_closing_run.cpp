@@ -96,6 +96,7 @@ void check(const std::string& plan, std::uint64_t seed, bool loop_expected) {
             << " refused as ambiguous, " << with.stats.loop_false << " of " << with.stats.loop_checked
             << " false; ATE " << without.ate << " m without, " << with.ate << " m with\n";
   EXPECT_EQ(with.stats.loop_false, 0);
+  EXPECT_EQ(with.stats.loop_wrong_pairs, 0);
   EXPECT_EQ(with.stats.loop_checked, with.stats.loop_closures);  // every closure was checked
   if (loop_expected) {
     EXPECT_GE(with.stats.loop_closures, 1);
@@ -164,6 +165,7 @@ TEST(LoopClosingRun, ScansCloseASparseLoopTheFeaturesCannot) {
               << slam.stats().loop_scan_placed << " placed by the scans), " << slam.stats().loop_false
               << " false; long relations " << e.translation.mean << " m over " << e.matched << "\n";
     EXPECT_GT(e.matched, 10u);
+    EXPECT_EQ(slam.stats().loop_wrong_pairs, 0);
     return std::tuple{slam.stats().loop_scan_placed, slam.stats().loop_false, e.translation.mean};
   };
   const auto [placed_without, false_without, long_without] = run_with(false);
