@@ -113,9 +113,9 @@ struct RunStats {
   std::int64_t loop_checked = 0;
   std::int64_t loop_false = 0;
   double loop_worst_disagreement = 0.0;  ///< m
-  /// With ground truth: closures most of whose pairs are not the same
-  /// object (each feature taken to the true frame through the pose it was
-  /// created at; slam_loop_closure.cpp, pairs_against_ground_truth). A false
+  /// With ground truth: closures with a pair that is not the same
+  /// object (each feature taken to the true frame through a pose it is
+  /// estimated with; pairs_against_ground_truth below). A false
   /// closure by the pose check above may still pair the right objects: the
   /// old map there was distorted; this counts wrong associations.
   std::int64_t loop_wrong_pairs = 0;
@@ -314,10 +314,11 @@ class Slam {
                                                                          const DataStep& data) const;
   /// How many pairs of a closure are not the same object by the ground truth
   /// (and how many could be checked): every feature is taken to the true
-  /// frame through the pose it was created at, G = gt ∘ est⁻¹ at that
-  /// record — its estimate relative to that pose is local, so the map's
-  /// global distortion cancels — and a pair whose coincidence residual
-  /// (symmetry directions projected out) exceeds 0.5 m somewhere is wrong.
+  /// frame through a pose it is estimated with, G = gt ∘ est⁻¹ there — a
+  /// local feature through the current pose, an old one through the pose
+  /// that last saw it or the one that created it (the closer of the two) —
+  /// so the map's global distortion cancels; a pair whose coincidence
+  /// residual (symmetry directions projected out) exceeds 0.5 m is wrong.
   std::optional<std::pair<int, int>> pairs_against_ground_truth(const MapMatchHypothesis& h,
                                                                 const std::vector<FeatureShape>& local,
                                                                 const std::vector<FeatureShape>& old,
