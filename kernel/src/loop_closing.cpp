@@ -487,6 +487,44 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     if (static_cast<int>(kept.size()) >= o.max_hypotheses) break;
   }
 
+  // The pass of the old map (MapMatchOptions::pass_gap) that holds most of
+  // the old features `chosen` pairs (positions in `gated`): their spans of
+  // observation sorted by start and chained while each starts within
+  // pass_gap of the chain's latest end; ties to the pass whose pairs fit
+  // better. Leaves `allowed` true for the old features whose span lies
+  // within pass_gap of that pass's (or that were never timed) and false for
+  // the rest; says whether a chosen pair fell outside the pass.
+  const auto keep_one_pass = [&](const std::vector<std::tuple<double, int, int, std::size_t>>& gated,
+                                 const std::vector<std::size_t>& chosen, std::vector<char>& allowed) {
+    struct Span {
+      double first, last, d2;
+    };
+    std::vector<Span> spans;  // of the chosen pairs' old features
+    for (const std::size_t g : chosen) {
+      const FeatureShape& f = old[static_cast<std::size_t>(std::get<2>(gated[g]))];
+      if (std::isfinite(f.seen_first) && std::isfinite(f.seen_last))
+        spans.push_back({f.seen_first, std::max(f.seen_first, f.seen_last), std::get<0>(gated[g])});
+    }
+    if (spans.size() < 2) return false;
+    std::sort(spans.begin(), spans.end(), [](const Span& a, const Span& b) { return a.first < b.first; });
+    struct Pass {
+      double first = 0.0, last = 0.0, d2 = 0.0;
+      std::size_t count = 0;
+    };
+    Pass best, now;
+    for (const Span& s : spans) {
+      if (now.count > 0 && s.first > now.last + o.pass_gap) now = Pass{};
+      if (now.count == 0) now.first = now.last = s.first;
+      now.last = std::max(now.last, s.last);
+      now.d2 += s.d2;
+      ++now.count;
+      if (now.count > best.count || (now.count == best.count && now.d2 < best.d2)) best = now;
+    }
+    for (std::size_t j = 0; j < old.size(); ++j)  // NaN compares false: allowed
+      allowed[j] = !(old[j].seen_last < best.first - o.pass_gap || old[j].seen_first > best.last + o.pass_gap);
+    return best.count < spans.size();
+  };
+
   // 2. Verification: pair one to one, refine the motion, test jointly.
   auto pair_up = [&](const PlanarMotion& T, bool coarse, MapMatchHypothesis& h, Eigen::Matrix3d& H,
                      Eigen::Vector3d& grad) {
@@ -522,16 +560,41 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
         kept_res.push_back(r);
       }
     std::sort(gated.begin(), gated.end());
-    std::vector<char> used_local(local.size(), 0), used_old(old.size(), 0);
+    // One to one, most compatible first; with pass_gap, a second time within
+    // the pass the first pairing mostly fell on.
+    const auto one_to_one = [&](const std::vector<char>& allowed_old) {
+      std::vector<char> used_local(local.size(), 0), used_old(old.size(), 0);
+      std::vector<std::size_t> chosen;  // positions in `gated`
+      for (std::size_t g = 0; g < gated.size(); ++g) {
+        const auto& [d2, i, j, at] = gated[g];
+        if (!allowed_old[static_cast<std::size_t>(j)]) continue;
+        if (used_local[static_cast<std::size_t>(i)] || used_old[static_cast<std::size_t>(j)]) continue;
+        used_local[static_cast<std::size_t>(i)] = used_old[static_cast<std::size_t>(j)] = 1;
+        chosen.push_back(g);
+      }
+      return chosen;
+    };
+    std::vector<char> allowed_old(old.size(), 1);
+    std::vector<std::size_t> chosen = one_to_one(allowed_old);
+    if (o.pass_gap > 0.0 && keep_one_pass(gated, chosen, allowed_old)) chosen = one_to_one(allowed_old);
+    std::vector<int> gated_local(local.size(), 0), gated_old(old.size(), 0);
+    for (const auto& [d2, i, j, at] : gated) {
+      if (!allowed_old[static_cast<std::size_t>(j)]) continue;
+      ++gated_local[static_cast<std::size_t>(i)];
+      ++gated_old[static_cast<std::size_t>(j)];
+    }
     h.pairs.clear();
+    h.pair_d2.clear();
+    h.pair_rivals.clear();
     h.d2 = 0.0;
     int rows = 0;
     H.setZero();
     grad.setZero();
-    for (const auto& [d2, i, j, at] : gated) {
-      if (used_local[static_cast<std::size_t>(i)] || used_old[static_cast<std::size_t>(j)]) continue;
-      used_local[static_cast<std::size_t>(i)] = used_old[static_cast<std::size_t>(j)] = 1;
+    for (const std::size_t c : chosen) {
+      const auto& [d2, i, j, at] = gated[c];
       h.pairs.emplace_back(i, j);
+      h.pair_d2.push_back(d2);
+      h.pair_rivals.push_back(gated_local[static_cast<std::size_t>(i)] + gated_old[static_cast<std::size_t>(j)] - 2);
       h.d2 += d2;
       const Residual<MaxN>& g = kept_res[at];
       rows += static_cast<int>(g.r.size());

@@ -58,6 +58,10 @@ struct FeatureShape {
   Eigen::VectorXd x;     ///< x_f, n coordinates
   Eigen::MatrixXd free;  ///< n × s symmetry directions (may have no columns)
   Eigen::MatrixXd cov;   ///< n × n covariance of x_f (B̃ P B̃ᵀ); empty: zero
+  /// When the robot observed the feature, first and last, in metres of its
+  /// travel (MapMatchOptions::pass_gap); NaN: not known (a loaded map).
+  double seen_first = std::numeric_limits<double>::quiet_NaN();
+  double seen_last = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// A planar rigid motion about a pivot: p ↦ R(θ) (p − pivot) + pivot + t.
@@ -141,12 +145,27 @@ struct MapMatchOptions {
   /// more (rad): the features then disagree with the seed's evidence.
   double seed_tolerance_translation = 0.45;
   double seed_tolerance_rotation = 0.035;
+  /// One pass of the old map (m of travel; 0: off). Two old features
+  /// observed (FeatureShape::seen_first to seen_last) at times more than
+  /// this far apart in travel, with no paired feature observed in between,
+  /// belong to different passes: nothing observed ties them, so they may
+  /// disagree with each other by the whole drift in between, and where they
+  /// lie relative to each other in the estimate says nothing about the
+  /// objects. A feature observed on both passes ties them (its observations
+  /// span the gap). A pairing keeps the pass with the most pairs (ties: the
+  /// better-fitting; features never timed join any) and pairs again within
+  /// it; a local feature that fit a feature of another pass stays unpaired.
+  double pass_gap = 0.0;
 };
 
 /// One verified hypothesis.
 struct MapMatchHypothesis {
   PlanarMotion motion;
   std::vector<std::pair<int, int>> pairs;  ///< (position in local, position in old)
+  std::vector<double> pair_d2;             ///< each pair's own D², in the order of `pairs`
+  /// Each pair's rivals in the gate: other old features its local one is
+  /// compatible with, plus other local features its old one is compatible with.
+  std::vector<int> pair_rivals;
   double d2 = 0.0;                         ///< joint D² of the pairing
   int dof = 0;                             ///< Σ dim rᵢ − 3
   bool jointly_compatible = false;

@@ -185,6 +185,12 @@ std::optional<std::pair<int, int>> Slam::pairs_against_ground_truth(const MapMat
     if (!std::isfinite(worst)) continue;
     ++checked;
     residuals << " " << worst;
+    if (log_->enabled(LogLevel::Debug)) {  // where each copy lies in the true frame, and when the old one was observed
+      residuals << " [old observed at " << fb.created_path << "–" << fb.last_seen_path << " m of travel; true frame: local "
+                << local_to_truth.apply(*a.layout, a.x).transpose();
+      if (const auto Gb = to_truth(fb.last_seen_path)) residuals << ", old " << Gb->apply(*b.layout, b.x).transpose();
+      residuals << "]";
+    }
     if (worst > 0.5) ++wrong;
   }
   if (log_->enabled(LogLevel::Debug))
@@ -236,6 +242,8 @@ FeatureShape Slam::estimated_shape(int i) const {
   const MapFeature& mf = features_[static_cast<std::size_t>(i)];
   FeatureShape s = feature_shape(mf, checked_marginal(mf.state_idx));
   s.feature = i;
+  s.seen_first = mf.created_path;
+  s.seen_last = mf.last_seen_path;
   return s;
 }
 
@@ -247,6 +255,10 @@ MapMatchOptions Slam::map_match_options() const {
   o.probability = a.gate_probability;
   o.max_translation_std = kMaxMotionSigmaTranslation;
   o.max_rotation_std = kMaxMotionSigmaRotation;
+  // The drift over loop_min_gap_path of travel is what makes a feature
+  // "old" (beyond the association gate): two old features observed that far
+  // apart in travel, and never together, may disagree as much with each other.
+  o.pass_gap = a.loop_min_gap_path;
   return o;
 }
 
@@ -566,12 +578,13 @@ void Slam::close_loops(const DataStep& data) {
   if (log_->enabled(LogLevel::Debug)) {
     std::ostringstream pairs;
     pairs.precision(3);
-    for (const auto& [li, oi] : match.best.pairs) {
+    for (std::size_t p = 0; p < match.best.pairs.size(); ++p) {
+      const auto [li, oi] = match.best.pairs[p];
       const MapFeature& fa = features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)];
       const MapFeature& fb = features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)];
       pairs << " " << fa.id << "(dim " << fa.feature->mspace_dim() << ": " << fa.feature->coords().transpose()
             << ") -> " << fb.id << "(dim " << fb.feature->mspace_dim() << ": " << fb.feature->coords().transpose()
-            << ");";
+            << ") D² " << match.best.pair_d2[p] << ", " << match.best.pair_rivals[p] << " rivals in the gate;";
     }
     log_->debug("step ", step_, ": loop closure pairs (local -> old):", pairs.str());
   }
