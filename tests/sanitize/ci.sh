@@ -12,9 +12,11 @@
 # programs compile in) at -O1, the tests' own code and the ceiling renderer
 # compiled as in the normal build (so, after ./setup.sh with the same ccache
 # and MSPACE_WERROR, ccache hands those objects over), builds it and runs
-# ctest on it (with CTEST_ARGS, e.g. -R or -L to run a part). The compiler is c++ (g++ on Debian, the one measured
-# in docs/reliability.md); SANITIZE_CXX=clang++ chooses clang, which compiled
-# kernel/src/slam.cpp with 31 % less CPU time there.
+# ctest on it (with CTEST_ARGS, e.g. -R or -L to run a part). The compiler
+# is c++ (g++ on Debian, the one measured in docs/reliability.md, and the
+# normal build's, whose test objects ccache then shares); SANITIZE_CXX=clang++
+# chooses clang, which compiled kernel/src/slam.cpp with 31 % less CPU time
+# there but recompiles every test.
 # UBSan findings are fatal (-fno-sanitize-recover), ASan's always are; leak
 # checking is on. Prints the build and the suite's wall times.
 set -euo pipefail
