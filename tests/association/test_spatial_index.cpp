@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "association.hpp"
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "plugin_registry.hpp"

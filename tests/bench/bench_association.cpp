@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "association.hpp"
+#include "build_path.hpp"
 #include "logging.hpp"
 #include "plugin_registry.hpp"
 #include "mspace/transform.hpp"

@@ -18,6 +18,7 @@
 #include <memory>
 #include <string>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "persistence.hpp"

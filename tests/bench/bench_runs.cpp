@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "outputs.hpp"

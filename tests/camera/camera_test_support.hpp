@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "ceiling_render/ceiling_renderer.hpp"
 #include "mspace/coords.hpp"
 #include "mspace/pose.hpp"

@@ -31,6 +31,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"
 #include "logging.hpp"

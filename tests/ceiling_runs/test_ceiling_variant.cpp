@@ -18,6 +18,7 @@
 #include <numeric>
 #include <string>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"
 #include "logging.hpp"

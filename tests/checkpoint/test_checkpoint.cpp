@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "building_log.hpp"
 #include "checkpoint.hpp"
 #include "config.hpp"

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "build_path.hpp"
 #include "check.hpp"
 #include "mspace/conformance.hpp"
 #include "mspace/feature.hpp"

@@ -12,6 +12,7 @@
 #include <string>
 #include <sys/wait.h>
 
+#include "build_path.hpp"
 #include "eval_command.hpp"
 
 namespace mspace::kernel {

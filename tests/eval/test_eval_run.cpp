@@ -10,6 +10,8 @@
 #include <string>
 #include <yaml-cpp/yaml.h>
 
+#include "build_path.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;

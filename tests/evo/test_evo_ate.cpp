@@ -33,6 +33,8 @@
 #include <vector>
 #include <yaml-cpp/yaml.h>
 
+#include "build_path.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;

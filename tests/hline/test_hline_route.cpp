@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "ceiling_world.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"

@@ -12,6 +12,7 @@
 #include <iostream>
 #include <string>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "laser_sim.hpp"
 #include "logging.hpp"

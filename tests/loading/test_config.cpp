@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include "build_path.hpp"
 #include "config.hpp"
 
 namespace fs = std::filesystem;

@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include "build_path.hpp"
 #include "mspace/abi.hpp"
 #include "mspace/extractor.hpp"
 #include "plugin_registry.hpp"

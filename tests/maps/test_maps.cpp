@@ -28,6 +28,7 @@
 #include <tuple>
 #include <vector>
 
+#include "build_path.hpp"
 #include "building_log.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"

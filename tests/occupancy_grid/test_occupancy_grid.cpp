@@ -15,6 +15,7 @@
 #include <vector>
 #include <yaml-cpp/yaml.h>
 
+#include "build_path.hpp"
 #include "building_log.hpp"
 #include "config.hpp"
 #include "logging.hpp"

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "mspace/feature_log.hpp"

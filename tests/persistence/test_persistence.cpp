@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "doorway_feature.hpp"
 #include "hline_feature.hpp"

@@ -9,6 +9,7 @@
 #include <numbers>
 #include <string>
 
+#include "build_path.hpp"
 #include "victoria_park.hpp"
 
 namespace mspace::victoria_park {

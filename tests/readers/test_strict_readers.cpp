@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "carmen_log/carmen_log.hpp"
 #include "carmen_log/carmen_reader.hpp"
 #include "image_sequence/image_sequence.hpp"

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "bag_writer.hpp"
+#include "build_path.hpp"
 #include "ceiling_render/ceiling_renderer.hpp"
 #include "config.hpp"
 #include "image_sequence/image_sequence.hpp"

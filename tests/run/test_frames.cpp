@@ -17,6 +17,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "outputs.hpp"

@@ -23,6 +23,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "build_path.hpp"
 #include "chi2.hpp"
 #include "config.hpp"
 #include "logging.hpp"

@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include "build_path.hpp"
 #include "outputs.hpp"
 
 namespace mspace::kernel {

@@ -6,13 +6,17 @@
 #   tests/sanitize/ci.sh [BUILD_DIR [CTEST_ARGS...]]   # default: build-asan
 #   tests/sanitize/ci.sh build-asan -R Checkpoint        # a part of the suite
 #
-# Configures BUILD_DIR with every target instrumented (-DMSPACE_SANITIZE:
-# the SDK library, the kernel, every plugin library — dlopen'ed by the kernel
-# and the tests — and every test), at -O1 so that the suite runs in
-# reasonable time, builds it and runs ctest on it (with CTEST_ARGS, e.g. -R
-# or -L to run a part). The compiler is c++ (g++ on Debian, the one measured
-# in docs/reliability.md); SANITIZE_CXX=clang++ chooses clang, which compiled
-# kernel/src/slam.cpp with 31 % less CPU time there.
+# Configures BUILD_DIR with the product instrumented (-DMSPACE_SANITIZE: the
+# SDK library, the kernel, `mspace`, the Python module, every plugin library —
+# dlopen'ed by the kernel and the tests — and the product sources that test
+# programs compile in) at -O1, the tests' own code and the ceiling renderer
+# compiled as in the normal build (so, after ./setup.sh with the same ccache
+# and MSPACE_WERROR, ccache hands those objects over), builds it and runs
+# ctest on it (with CTEST_ARGS, e.g. -R or -L to run a part). The compiler
+# is c++ (g++ on Debian, the one measured in docs/reliability.md, and the
+# normal build's, whose test objects ccache then shares); SANITIZE_CXX=clang++
+# chooses clang, which compiled kernel/src/slam.cpp with 31 % less CPU time
+# there but recompiles every test.
 # UBSan findings are fatal (-fno-sanitize-recover), ASan's always are; leak
 # checking is on. Prints the build and the suite's wall times.
 set -euo pipefail
@@ -27,7 +31,7 @@ launcher=()
 command -v ccache > /dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 start=$(date +%s)
 cmake -S "$src" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release "${compiler[@]}" \
-  -DCMAKE_CXX_FLAGS_RELEASE="-O1 -DNDEBUG" -DMSPACE_SANITIZE=address,undefined "${launcher[@]}" \
+  -DMSPACE_SANITIZE=address,undefined -DMSPACE_WERROR="${MSPACE_WERROR:-OFF}" "${launcher[@]}" \
   -DPython3_EXECUTABLE=/usr/bin/python3 > "$build.configure.log" 2>&1 ||
   { cat "$build.configure.log"; exit 1; }
 cmake --build "$build" -j "$jobs"

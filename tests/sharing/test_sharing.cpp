@@ -6,6 +6,7 @@
 
 #include <Eigen/LU>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "outputs.hpp"

@@ -43,6 +43,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "building_log.hpp"
 #include "carmen_log.hpp"
 #include "config.hpp"

@@ -22,6 +22,7 @@
 
 #include <Eigen/Dense>
 
+#include "build_path.hpp"
 #include "building_log.hpp"
 #include "carmen_log.hpp"
 #include "logged_source.hpp"

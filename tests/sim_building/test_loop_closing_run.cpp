@@ -33,6 +33,7 @@
 #include <tuple>
 #include <vector>
 
+#include "build_path.hpp"
 #include "building_log.hpp"
 #include "config.hpp"
 #include "logging.hpp"

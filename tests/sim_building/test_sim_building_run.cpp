@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <iostream>
 
+#include "build_path.hpp"
 #include "building_log.hpp"
 #include "ring_building.hpp"
 #include "config.hpp"

@@ -20,6 +20,7 @@
 
 #include <filesystem>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "plugin_registry.hpp"

@@ -23,6 +23,7 @@
 #include <iostream>
 #include <vector>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "evaluation.hpp"
 #include "logging.hpp"

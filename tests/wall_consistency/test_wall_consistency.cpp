@@ -34,6 +34,7 @@
 #include <string>
 #include <vector>
 
+#include "build_path.hpp"
 #include "config.hpp"
 #include "logging.hpp"
 #include "mspace/estimator.hpp"
