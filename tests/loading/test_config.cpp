@@ -218,7 +218,7 @@ TEST(Config, StringChoicesAndListsAreChecked) {
 TEST(Config, UnknownPluginListsTheKnownOnes) {
   EXPECT_EQ(config_error(edited("    plugin: stub_feature", "    plugin: nope")),
             "test.yaml:12:13: features.points.plugin: unknown plugin 'nope'; known plugins: badabi, good, misnamed, "
-            "notaplugin, stub_estimator, stub_feature, stub_motion, stub_source, throwing (searched: " +
+            "notaplugin, otherheap, stub_estimator, stub_feature, stub_motion, stub_source, throwing (searched: " +
                 kFixtureDir.string() + ")");
 }
 

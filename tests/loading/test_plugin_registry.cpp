@@ -75,9 +75,9 @@ class TempDir {
 
 TEST(PluginRegistry, DiscoversPluginsByFileNameWithoutLoadingThem) {
   auto registry = fixture_registry();
-  const std::vector<std::string> expected = {"badabi",      "good",           "misnamed",
-                                             "notaplugin",  "stub_estimator", "stub_feature",
-                                             "stub_motion", "stub_source",    "throwing"};
+  const std::vector<std::string> expected = {"badabi",       "good",         "misnamed",    "notaplugin",
+                                             "otherheap",    "stub_estimator", "stub_feature", "stub_motion",
+                                             "stub_source",  "throwing"};
   EXPECT_EQ(registry->known_names(), expected);
   EXPECT_FALSE(is_loaded(fixture_file("good")));
   EXPECT_FALSE(is_loaded(fixture_file("badabi")));
@@ -99,7 +99,7 @@ TEST(PluginRegistry, LoadsOnlyTheRequestedLibraryAndCachesIt) {
 TEST(PluginRegistry, UnknownNameListsKnownPluginsAndSearchedDirs) {
   auto registry = fixture_registry();
   EXPECT_EQ(plugin_error([&] { registry->load("nope"); }),
-            "unknown plugin 'nope'; known plugins: badabi, good, misnamed, notaplugin, stub_estimator, "
+            "unknown plugin 'nope'; known plugins: badabi, good, misnamed, notaplugin, otherheap, stub_estimator, "
             "stub_feature, stub_motion, stub_source, throwing (searched: " +
                 kFixtureDir.string() + ")");
 }
@@ -111,6 +111,18 @@ TEST(PluginRegistry, RefusesAnotherAbiTagBeforeCallingTheLibrary) {
             "plugin library '" + fixture_file("badabi").string() +
                 "' was built for SDK ABI 'mspace-sdk0/gcc4/cxx98/eigen3.2/align16' but this mspace expects '" +
                 MSPACE_ABI_TAG + "'; rebuild the plugin against this SDK");
+}
+
+TEST(PluginRegistry, RefusesAPluginCompiledWithAnotherEigenHeapScheme) {
+  // otherheap is this SDK's headers and MSPACE_EXPORT_PLUGIN with glibc's malloc
+  // as Eigen's allocator: only the heap part of the tag differs, and that is
+  // enough to refuse it (its descriptor aborts if called).
+  std::string expected = MSPACE_ABI_TAG;
+  ASSERT_EQ(expected.substr(expected.size() - 6), "/heap0");
+  std::string other = expected.substr(0, expected.size() - 1) + "1";
+  EXPECT_EQ(plugin_error([&] { auto registry = fixture_registry(); registry->load("otherheap"); }),
+            "plugin library '" + fixture_file("otherheap").string() + "' was built for SDK ABI '" + other +
+                "' but this mspace expects '" + expected + "'; rebuild the plugin against this SDK");
 }
 
 TEST(PluginRegistry, RefusesALibraryWithoutTheAbiSymbol) {
@@ -135,10 +147,11 @@ TEST(PluginRegistry, LoadAllCollectsTheFailures) {
   const std::vector<std::string> expected = {"good",        "stub_estimator", "stub_feature",
                                              "stub_motion", "stub_source",    "throwing"};
   EXPECT_EQ(loaded, expected);
-  ASSERT_EQ(errors.size(), 3u);  // badabi, misnamed, notaplugin, in name order
+  ASSERT_EQ(errors.size(), 4u);  // badabi, misnamed, notaplugin, otherheap, in name order
   EXPECT_NE(errors[0].find("SDK ABI"), std::string::npos) << errors[0];
   EXPECT_NE(errors[1].find("othername"), std::string::npos) << errors[1];
   EXPECT_NE(errors[2].find("no mspace_abi_tag symbol"), std::string::npos) << errors[2];
+  EXPECT_NE(errors[3].find("/heap1"), std::string::npos) << errors[3];
   EXPECT_THROW(fixture_registry()->load_all(nullptr), PluginError);
 }
 
@@ -149,7 +162,7 @@ TEST(PluginRegistry, FirstSearchDirWins) {
   registry.add_search_dir(dir.path());
   registry.add_search_dir(kFixtureDir);
   EXPECT_EQ(registry.load("good")->path, dir.path() / "libmspace-plugin-good.so");
-  EXPECT_EQ(registry.known_names().size(), 9u);
+  EXPECT_EQ(registry.known_names().size(), 10u);
 }
 
 TEST(PluginRegistry, PluginFileTakesItsNameFromTheDescriptor) {

@@ -49,12 +49,19 @@
 #endif
 
 /// The tag: SDK major version, compiler family/major, libstdc++ string ABI,
-/// Eigen version and Eigen's maximum static alignment (which changes the layout
-/// of fixed-size Eigen members such as Pose6).
+/// Eigen version, Eigen's maximum static alignment (which changes the layout
+/// of fixed-size Eigen members such as Pose6) and Eigen's heap scheme
+/// (EIGEN_MALLOC_ALREADY_ALIGNED: 1 = glibc's malloc, 0 = Eigen's own aligned
+/// allocator, which frees a block through an offset stored before it). A
+/// matrix allocated under one scheme and freed under the other corrupts the
+/// heap, and Eigen switches scheme by itself under AddressSanitizer, so the
+/// SDK's CMake package fixes it to 0 (sdk/CMakeLists.txt) and the tag makes a
+/// plugin compiled otherwise fail to load with a clear message.
 #define MSPACE_ABI_TAG                                                          \
   "mspace-sdk" MSPACE_ABI_STR(MSPACE_SDK_VERSION_MAJOR) "/" MSPACE_ABI_COMPILER \
   "/" MSPACE_ABI_STDLIB "/eigen" MSPACE_ABI_STR(EIGEN_WORLD_VERSION) "."       \
-  MSPACE_ABI_STR(EIGEN_MAJOR_VERSION) "/align" MSPACE_ABI_STR(EIGEN_MAX_STATIC_ALIGN_BYTES)
+  MSPACE_ABI_STR(EIGEN_MAJOR_VERSION) "/align" MSPACE_ABI_STR(EIGEN_MAX_STATIC_ALIGN_BYTES) \
+  "/heap" MSPACE_ABI_STR(EIGEN_MALLOC_ALREADY_ALIGNED)
 
 namespace mspace {
 /// The ABI tag the calling code was compiled with.
