@@ -197,7 +197,10 @@ void Slam::skip_data_steps() {
 }
 
 Eigen::MatrixXd Slam::state_covariance(const std::vector<int>& idx) const {
-  if (!considered_) return estimator_->marginal(idx);
+  // Checked (size, finiteness, exceptions named): association, the map files
+  // and the picture index these rows by the request, so a plugin's matrix of
+  // another size would be read out of bounds.
+  if (!considered_) return checked_marginal(idx);
   return considered_->covariance(idx, checked_marginal(robot_idx_));
 }
 

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iomanip>
 #include <numbers>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -239,6 +240,19 @@ void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>
 }
 
 void write_map_yaml(const std::filesystem::path& file, const Slam& slam) {
+  // The covariances come from the estimator plugin; when it cannot give them
+  // (a run stopped by a broken estimator), the map is written without them
+  // and says why, rather than lost.
+  std::string unreadable;
+  const auto covariance = [&](const std::vector<int>& rows) -> std::optional<Eigen::MatrixXd> {
+    if (!unreadable.empty()) return std::nullopt;
+    try {
+      return slam.state_covariance(rows);
+    } catch (const std::exception& e) {
+      unreadable = e.what();
+      return std::nullopt;
+    }
+  };
   YAML::Emitter y;
   y.SetDoublePrecision(9);
   y << YAML::BeginMap;
@@ -258,10 +272,11 @@ void write_map_yaml(const std::filesystem::path& file, const Slam& slam) {
     emit_vector(y, f.feature->coords());
     y << YAML::Key << "mspace_dim" << YAML::Value << f.feature->mspace_dim();
     y << YAML::Key << "observations" << YAML::Value << f.times_matched + 1;
-    if (!f.state_idx.empty()) {
-      y << YAML::Key << "covariance" << YAML::Value;
-      emit_matrix(y, slam.feature_covariance(f));
-    }
+    if (!f.state_idx.empty())
+      if (const auto C = covariance(f.state_idx)) {
+        y << YAML::Key << "covariance" << YAML::Value;
+        emit_matrix(y, *C);
+      }
     if (!f.shared.empty()) {
       y << YAML::Key << "shared_blocks" << YAML::Value << YAML::Flow << YAML::BeginMap;
       for (const auto& [block, id] : f.shared) y << YAML::Key << block << YAML::Value << id;
@@ -283,12 +298,15 @@ void write_map_yaml(const std::filesystem::path& file, const Slam& slam) {
         y << YAML::Flow << YAML::BeginMap << YAML::Key << "feature" << YAML::Value << feature << YAML::Key << "block"
           << YAML::Value << block << YAML::EndMap;
       y << YAML::EndSeq;
-      y << YAML::Key << "covariance" << YAML::Value;
-      emit_matrix(y, slam.state_covariance(c.state_idx));
+      if (const auto C = covariance(c.state_idx)) {
+        y << YAML::Key << "covariance" << YAML::Value;
+        emit_matrix(y, *C);
+      }
       y << YAML::EndMap;
     }
     y << YAML::EndSeq;
   }
+  if (!unreadable.empty()) y << YAML::Key << "covariances_unavailable" << YAML::Value << unreadable;
   y << YAML::EndMap;
   std::ofstream out = open_for_writing(file);
   out << "# mspace map: every feature with its coordinates x_f (map frame), its M-space\n"

@@ -143,6 +143,7 @@ void draw_ellipse(cv::Mat& img, const View& v, const Eigen::Vector2d& c, const E
 /// blocks as a polyline, shaded by M-space dimension, with 3σ ellipses of
 /// placed features; shared coordinates as squares.
 void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
+  bool covariances_readable = true;
   for (const MapFeature& f : slam.features()) {
     const int dim = f.feature->mspace_dim();
     const int max_dim = slam.feature_types()[f.type].type->max_mspace_dim();
@@ -166,10 +167,19 @@ void draw_features(cv::Mat& img, const View& v, const Slam& slam) {
         cv::circle(img, v.px(pts[0].x(), pts[0].y()), dim > 0 ? 3 : 2, colour, cv::FILLED, cv::LINE_AA);
     }
     // No ellipses where no position is known: they would sit at guessed points.
-    if (dim == 0 || (drawing && drawing->direction_only())) continue;
+    if (dim == 0 || (drawing && drawing->direction_only()) || !covariances_readable) continue;
     // Covariance of x_f implied by the M-space covariance: B̃ P B̃ᵀ (eq. 11).
+    // A run stopped by a broken estimator may have none to give: the map is
+    // drawn without ellipses then.
+    Eigen::MatrixXd P;
+    try {
+      P = slam.feature_covariance(f);
+    } catch (const std::exception&) {
+      covariances_readable = false;
+      continue;
+    }
     const Eigen::MatrixXd Bd = f.feature->B_dual();
-    const Eigen::MatrixXd C = Bd * slam.feature_covariance(f) * Bd.transpose();
+    const Eigen::MatrixXd C = Bd * P * Bd.transpose();
     const CoordLayout& layout = f.feature->layout();
     for (int b = 0, p = 0; b < layout.num_blocks(); ++b) {
       if (layout.kind(b) == BlockKind::Scalar) continue;

@@ -1,11 +1,13 @@
 #include "runner.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <csignal>
 #include <cstdlib>
 #include <exception>
 #include <memory>
+#include <stdexcept>
 #include <string>
 
 #include "checkpoint.hpp"
@@ -24,36 +26,72 @@ std::string status_line(const Slam& slam) {
   return std::to_string(in_map) + " features, " + std::to_string(tentative) + " tentative";
 }
 
-/// Writes the outputs the configuration asks for; returns the names written.
-std::vector<std::string> write_outputs(const Slam& slam, const RunSummary& summary, const std::filesystem::path& dir,
-                                       const ScanCollector* scans) {
+/// What write_outputs() wrote, and what it could not write ("name: reason; …",
+/// empty when everything was written).
+struct WrittenOutputs {
+  std::vector<std::string> files;
+  std::string failures;
+  bool has(const std::string& name) const { return std::find(files.begin(), files.end(), name) != files.end(); }
+  /// "writing the outputs in DIR failed (…); written: …".
+  std::string failure_message(const std::filesystem::path& dir) const {
+    std::string done;
+    for (const std::string& name : files) done += (done.empty() ? "" : ", ") + name;
+    return "writing the outputs in " + dir.string() + " failed (" + failures + "); written: " +
+           (done.empty() ? std::string("nothing") : done);
+  }
+};
+
+/// Writes the outputs the configuration asks for. Each output is attempted
+/// whatever happened to the ones before it: a broken estimator plugin may make
+/// the map's covariances unreadable, which must not cost the summary or the
+/// trajectory.
+WrittenOutputs write_outputs(const Slam& slam, const RunSummary& summary, const std::filesystem::path& dir,
+                             const ScanCollector* scans) {
   const OutputConfig& out = slam.config().output;
   std::filesystem::create_directories(dir);
   namespace fs = std::filesystem;
-  std::vector<std::string> written;
+  WrittenOutputs result;
+  std::vector<std::string>& written = result.files;
+  std::string& failures = result.failures;
+  const auto attempt = [&](const char* name, const auto& write) {
+    try {
+      write();
+    } catch (const std::exception& e) {
+      failures += std::string(failures.empty() ? "" : "; ") + name + ": " + e.what();
+    }
+  };
   if (out.trajectory)  // with their frames (pose_files.cpp)
-    for (const fs::path& f : write_pose_files(dir, slam)) written.push_back(f.filename().string());
+    attempt("trajectory", [&] {
+      for (const fs::path& f : write_pose_files(dir, slam)) written.push_back(f.filename().string());
+    });
   if (out.map) {
-    write_atomically(dir / "map.yaml", [&](const fs::path& f) { write_map_yaml(f, slam); });
-    written.emplace_back("map.yaml");
+    attempt("map.yaml", [&] {
+      write_atomically(dir / "map.yaml", [&](const fs::path& f) { write_map_yaml(f, slam); });
+      written.emplace_back("map.yaml");
+    });
     // The exact store, through the plugins' save(); atomic itself. A localize
     // run changes no map: the map.bin it read stays the map.
-    if (slam.map_mode() != MapConfig::Mode::Localize) {
-      write_map_bin(dir / "map.bin", slam);
-      written.emplace_back("map.bin");
-    }
+    if (slam.map_mode() != MapConfig::Mode::Localize)
+      attempt("map.bin", [&] {
+        write_map_bin(dir / "map.bin", slam);
+        written.emplace_back("map.bin");
+      });
   }
-  if (out.summary) {
-    write_atomically(dir / "summary.yaml", [&](const fs::path& f) { write_summary_yaml(f, summary, slam); });
-    written.emplace_back("summary.yaml");
-  }
-  if (out.picture) {
-    write_atomically(dir / "map.png", [&](const fs::path& f) { write_picture(f, slam, out.picture_size); });
-    written.emplace_back("map.png");
-  }
+  if (out.summary)
+    attempt("summary.yaml", [&] {
+      write_atomically(dir / "summary.yaml", [&](const fs::path& f) { write_summary_yaml(f, summary, slam); });
+      written.emplace_back("summary.yaml");
+    });
+  if (out.picture)
+    attempt("map.png", [&] {
+      write_atomically(dir / "map.png", [&](const fs::path& f) { write_picture(f, slam, out.picture_size); });
+      written.emplace_back("map.png");
+    });
   if (scans != nullptr)  // grid.pgm/.yaml/.png from the final trajectory
-    for (const fs::path& f : write_grid_outputs(dir, slam, *scans)) written.push_back(f.filename().string());
-  return written;
+    attempt("grid", [&] {
+      for (const fs::path& f : write_grid_outputs(dir, slam, *scans)) written.push_back(f.filename().string());
+    });
+  return result;
 }
 
 /// Keeps the run's range scans for the occupancy grid while it is alive.
@@ -173,10 +211,18 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
       try {
         result.summary = summarize(slam, elapsed());
         result.summary.stopped_by_error = e.what();
-        result.files = write_outputs(slam, result.summary, result.output_dir, recording.scans());
-        if (stream) stream->discard();
-        kernel_log().error("run stopped after ", slam.steps_done(),
-                           " steps; the outputs of those steps were written to ", result.output_dir.string());
+        const WrittenOutputs written = write_outputs(slam, result.summary, result.output_dir, recording.scans());
+        result.files = written.files;
+        if (stream && written.has("trajectory.tum")) stream->discard();
+        if (written.failures.empty())
+          kernel_log().error("run stopped after ", slam.steps_done(),
+                             " steps; the outputs of those steps were written to ", result.output_dir.string());
+        else
+          kernel_log().error("run stopped after ", slam.steps_done(), " steps; ",
+                             written.failure_message(result.output_dir),
+                             (stream && !written.has("trajectory.tum")
+                                  ? "; the trajectory so far is in trajectory.partial.tum"
+                                  : ""));
       } catch (const std::exception& again) {
         kernel_log().error("run stopped after ", slam.steps_done(), " steps, and writing its outputs failed too: ",
                            again.what(), (stream ? "; the trajectory so far is in trajectory.partial.tum" : ""));
@@ -199,8 +245,10 @@ RunResult run_to_end(Slam& slam, const RunOptions& options) {
                       signal_name(result.stop_signal), " again ends at once)");
   }
   if (options.write_outputs) {
-    result.files = write_outputs(slam, result.summary, result.output_dir, recording.scans());
-    if (stream) stream->discard();
+    const WrittenOutputs written = write_outputs(slam, result.summary, result.output_dir, recording.scans());
+    result.files = written.files;
+    if (stream && written.has("trajectory.tum")) stream->discard();
+    if (!written.failures.empty()) throw std::runtime_error(written.failure_message(result.output_dir));
   }
   return result;
 }

@@ -219,7 +219,7 @@ Eigen::MatrixXd Slam::true_landmarks() const { return source_->true_landmarks();
 
 std::size_t Slam::skipped_records() const { return source_->skipped_records(); }
 
-Eigen::MatrixXd Slam::robot_covariance() const { return estimator_->marginal(robot_idx_); }
+Eigen::MatrixXd Slam::robot_covariance() const { return checked_marginal(robot_idx_); }
 
 Eigen::MatrixXd Slam::feature_covariance(const MapFeature& f) const {
   if (f.state_idx.empty()) return {};
