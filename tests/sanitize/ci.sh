@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite under AddressSanitizer + UndefinedBehaviorSanitizer
-# (docs/reliability.md "Sanitizers", which says what it costs and why CI does
-# not run it yet).
+# (docs/reliability.md "Sanitizers", which says what it costs); .ci/run runs
+# it last.
 #
 #   tests/sanitize/ci.sh [BUILD_DIR [CTEST_ARGS...]]   # default: build-asan
 #   tests/sanitize/ci.sh build-asan -R Checkpoint        # a part of the suite
