@@ -26,8 +26,10 @@ cxx=${FUZZ_CXX:-clang++}
 out=$build/fuzz
 mkdir -p "$out/obj" "$out/corpus" "$out/findings" "$out/seeds"
 
+# EIGEN_MALLOC_ALREADY_ALIGNED=0: Eigen's heap scheme of every mspace build
+# (top-level CMakeLists.txt), so matrices cross into BUILD_DIR's libraries.
 flags=(-std=c++20 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=undefined
-       -DNDEBUG -I"$src/sdk/include" -I"$src/sensors_plugins" -I"$src/sensors_plugins/carmen_log"
+       -DNDEBUG -DEIGEN_MALLOC_ALREADY_ALIGNED=0 -I"$src/sdk/include" -I"$src/sensors_plugins" -I"$src/sensors_plugins/carmen_log"
        -I"$src/tests/fuzz" -I"$src/kernel/src" -isystem /usr/include/eigen3 -isystem /usr/include/opencv4
        -DSPDLOG_COMPILED_LIB -DSPDLOG_FMT_EXTERNAL -DSPDLOG_SHARED_LIB -DFMT_SHARED
        -DMSPACE_PLUGIN_DIR="\"$build/lib/mspace/plugins\"")
