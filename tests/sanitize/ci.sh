@@ -63,9 +63,21 @@ if [[ -n ${SANITIZE_SHARD:-} ]]; then
     exit 2
   fi
   shard=${BASH_REMATCH[1]} shards=${BASH_REMATCH[2]}
+  # Every listed name must be a test of this build: a renamed long test would
+  # otherwise run in every CI run from then on, unnoticed, until CI's time ran out.
+  list=$src/tests/sanitize/long_tests.txt
+  ctest --test-dir "$build" -N | sed -n 's/^ *Test *#[0-9]*: \([^ ]*\).*/\1/p' > "$build/sanitize_tests.txt"
+  missing=$(awk -F'\t' 'NR == FNR { known[$1] = 1; next }
+                         !/^#/ && !($2 in known) { printf "%s:%d: no test named %s in this build\n", FILENAME, FNR, $2 }' \
+            "$build/sanitize_tests.txt" "$list")
+  if [[ -n $missing ]]; then
+    echo "$missing" >&2
+    echo "sanitize: a renamed test is renamed in $list too (its seconds stay), a removed one removed" >&2
+    exit 2
+  fi
   # Largest first, each to the shard with the least time so far; the names of
   # the other shards' tests, as a CTest regular expression.
-  others=$(grep -v '^#' "$src/tests/sanitize/long_tests.txt" | sort -t$'\t' -k1,1nr -k2,2 |
+  others=$(grep -v '^#' "$list" | sort -t$'\t' -k1,1nr -k2,2 |
     awk -F'\t' -v k="$shard" -v n="$shards" '
       { best = 0
         for (i = 1; i < n; ++i) if (load[i] < load[best]) best = i
