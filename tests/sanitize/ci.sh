@@ -49,9 +49,10 @@ echo "sanitize: built with ${SANITIZE_CXX:-c++} in $((built - start)) s"
 # suite's (the README's test command, which .ci/run runs before this) order
 # them well, so the longest runs do not start last and leave a core idle.
 costs=Testing/Temporary/CTestCostData.txt
-if [[ -f ${NORMAL_BUILD:-$src/build}/$costs && ! -f $build/$costs ]]; then
+normal_build=${NORMAL_BUILD:-$src/build}
+if [[ -f $normal_build/$costs && ! -f $build/$costs ]]; then
   mkdir -p "$build/Testing/Temporary"
-  cp "${NORMAL_BUILD:-$src/build}/$costs" "$build/$costs"
+  cp "$normal_build/$costs" "$build/$costs"
 fi
 
 # The long tests (tests/sanitize/long_tests.txt) in shards: SANITIZE_SHARD=k/n
