@@ -149,6 +149,14 @@ class InterpretationTree {
     if (!bounded_) {
       result.chosen = best_;
       result.d2 = best_pairings_ > 0 ? best_d2_ : 0.0;
+      if (options_.find_rivals && best_pairings_ > 0) {
+        find_rivals();
+        result.rival_nodes = rival_nodes_;
+        result.rivals_bounded = rivals_bounded_;
+        for (int c : best_)
+          if (rivals_bounded_ || disputed_[static_cast<std::size_t>(c)]) result.disputed.push_back(c);
+        std::sort(result.disputed.begin(), result.disputed.end());
+      }
     }
     return result;
   }
@@ -229,6 +237,50 @@ class InterpretationTree {
     if (promising(pairings + remaining - 1, d2)) descend(level + 1, rows, d2);  // the null pairing
   }
 
+  // ---- Rivals: every jointly compatible hypothesis with as many pairings
+  // as the best (the search above keeps only the one of smallest D²). No
+  // bound on D² beyond the joint gate: two hypotheses that both pass it are
+  // both explanations the data allow. The union of what they leave out of
+  // the best is disputed.
+  void find_rivals() {
+    disputed_.assign(cands_.size(), false);
+    undisputed_ = static_cast<int>(best_.size());
+    descend_rival(0, 0, 0.0);
+  }
+
+  void descend_rival(std::size_t level, Eigen::Index rows, double d2) {
+    if (rivals_bounded_ || undisputed_ == 0) return;  // nothing left to learn
+    if (++rival_nodes_ > (options_.max_rival_nodes < 0 ? options_.max_nodes : options_.max_rival_nodes)) {
+      rivals_bounded_ = true;
+      return;
+    }
+    const int pairings = static_cast<int>(hypothesis_.size());
+    const int remaining = static_cast<int>(levels_.size() - level);
+    if (pairings + remaining < best_pairings_) return;
+    if (level == levels_.size()) {  // pairings == best_pairings_ here: no hypothesis has more
+      std::vector<bool> in_rival(cands_.size(), false);
+      for (int c : hypothesis_) in_rival[static_cast<std::size_t>(c)] = true;
+      for (int c : best_)
+        if (!in_rival[static_cast<std::size_t>(c)] && !disputed_[static_cast<std::size_t>(c)]) {
+          disputed_[static_cast<std::size_t>(c)] = true;
+          --undisputed_;
+        }
+      return;
+    }
+    for (int c : levels_[level]) {
+      if (feature_used_[cands_[c].feature]) continue;
+      const double d2_new = pair(c, rows, d2);
+      if (d2_new == kInf) continue;
+      feature_used_[cands_[c].feature] = true;
+      hypothesis_.push_back(c);
+      descend_rival(level + 1, rows + cands_[c].innovation.eta.size(), d2_new);
+      hypothesis_.pop_back();
+      feature_used_[cands_[c].feature] = false;
+      if (rivals_bounded_) return;
+    }
+    if (pairings + remaining - 1 >= best_pairings_) descend_rival(level + 1, rows, d2);  // the null pairing
+  }
+
   const std::vector<Candidate>& cands_;
   JcbbOptions options_;
   std::vector<std::vector<int>> levels_;
@@ -243,6 +295,10 @@ class InterpretationTree {
   double best_d2_ = kInf;
   std::int64_t nodes_ = 0;
   bool bounded_ = false;
+  std::vector<bool> disputed_;  ///< by candidate position: a pairing of the best that a rival leaves out
+  int undisputed_ = 0;                   ///< pairings of the best not yet disputed
+  std::int64_t rival_nodes_ = 0;
+  bool rivals_bounded_ = false;
 };
 
 }  // namespace
@@ -696,8 +752,9 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   std::vector<int> chosen;
   if (joint) {
     ++stats_.jcbb_readings;
-    const JcbbResult jc = joint_compatibility(candidates, map.marginal, {ac.gate_probability, ac.jcbb_max_nodes, &joint_chi2_});
-    stats_.jcbb_nodes += jc.nodes;
+    const JcbbResult jc = joint_compatibility(candidates, map.marginal,
+                                              {ac.gate_probability, ac.jcbb_max_nodes, &joint_chi2_, ac.refuse_ambiguous});
+    stats_.jcbb_nodes += jc.nodes + jc.rival_nodes;
     if (jc.bounded) {
       ++stats_.jcbb_bounded;
       if (log_->enabled(LogLevel::Debug))
@@ -705,9 +762,25 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
                     " nodes; nearest neighbour used");
       chosen = nearest_neighbour(candidates, static_cast<int>(meas.size()), static_cast<int>(map.features.size()));
     } else {
-      // The jointly compatible pairings, then tentative features as nearest
-      // neighbour pairs them (dense information only).
-      chosen = jc.chosen;
+      // The jointly compatible pairings that no rival disputes, then
+      // tentative features as nearest neighbour pairs them (dense information
+      // only). A disputed measurement stays unpaired and, lying in the gate
+      // of a feature, starts none.
+      for (int c : jc.chosen)
+        if (!std::binary_search(jc.disputed.begin(), jc.disputed.end(), c)) chosen.push_back(c);
+      if (!jc.disputed.empty()) {
+        ++stats_.ambiguous_readings;
+        stats_.disputed_pairings += static_cast<std::int64_t>(jc.disputed.size());
+        if (log_->enabled(LogLevel::Debug)) {
+          std::ostringstream os;
+          for (int c : jc.disputed)
+            os << " measurement " << candidates[c].measurement << " to #" << map.features[candidates[c].feature].id
+               << " (d2 " << candidates[c].d2 << ")";
+          log_->debug("step ", map.step, ": ", jc.disputed.size(), " of ", jc.chosen.size(),
+                      " pairings disputed by a rival hypothesis", jc.rivals_bounded ? " (rival search gave up)" : "",
+                      ", not used:", os.str());
+        }
+      }
       std::vector<bool> meas_used(meas.size(), false);
       std::vector<bool> feature_used(map.features.size(), false);
       for (int c : chosen) {

@@ -69,6 +69,13 @@ struct JcbbOptions {
   /// χ² quantiles of `probability` by dimension (< 0: not computed yet),
   /// kept from reading to reading by the caller; null: a fresh cache.
   std::vector<double>* chi2_cache = nullptr;
+  /// After the best hypothesis, look for rivals: other jointly compatible
+  /// hypotheses with as many pairings. A pairing of the best that a rival
+  /// does not make is disputed (JcbbResult::disputed) — the data cannot tell
+  /// which of the two is right (a corridor's two walls under a large lateral
+  /// uncertainty, a symmetric building).
+  bool find_rivals = false;
+  std::int64_t max_rival_nodes = -1;  ///< nodes for the rivals' search; < 0: max_nodes
 };
 
 struct JcbbResult {
@@ -76,6 +83,11 @@ struct JcbbResult {
   double d2 = 0.0;          ///< joint squared Mahalanobis distance of the chosen pairings
   std::int64_t nodes = 0;   ///< interpretation-tree nodes visited
   bool bounded = false;     ///< the search hit max_nodes: `chosen` is not the optimum (empty)
+  /// With find_rivals: the positions in `chosen` (candidate positions) that a
+  /// rival hypothesis contradicts, ascending; `chosen` still holds them.
+  std::vector<int> disputed;
+  std::int64_t rival_nodes = 0;  ///< nodes visited looking for rivals
+  bool rivals_bounded = false;   ///< that search hit max_nodes: every pairing counts as disputed
 };
 
 /// Covariance of the given estimator rows (Estimator::marginal).
@@ -88,6 +100,9 @@ using MarginalFn = std::function<Eigen::MatrixXd(const std::vector<int>&)>;
 /// where J stacks the candidates' J_state over the union of their indices,
 /// so that the shared robot pose correlates every pairing. S grows by one
 /// block per pairing (a Cholesky block update); null pairings are allowed.
+/// With options.find_rivals a second pass enumerates the jointly compatible
+/// hypotheses with as many pairings as the best and marks the best's
+/// pairings that any of them leaves out (JcbbResult::disputed).
 JcbbResult joint_compatibility(const std::vector<Candidate>& candidates, const MarginalFn& marginal,
                                const JcbbOptions& options);
 
@@ -166,6 +181,10 @@ struct AssociationStats {
   std::int64_t jcbb_nodes = 0;      ///< interpretation-tree nodes visited in all
   std::int64_t jcbb_bounded = 0;    ///< readings whose search hit max_nodes (greedy result used)
   std::int64_t index_queries = 0;   ///< readings whose features came from the spatial index
+  /// With association.refuse_ambiguous: readings where a rival hypothesis
+  /// disputed some of the best one's pairings, and the pairings so dropped.
+  std::int64_t ambiguous_readings = 0;
+  std::int64_t disputed_pairings = 0;
 };
 
 class Associator {

@@ -132,7 +132,8 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
   run.put("odometry_steps", row_of({static_cast<double>(odometry_steps_)}));
   const AssociationStats& a = associator_.stats();
   run.put("association", row_of({static_cast<double>(a.jcbb_readings), static_cast<double>(a.jcbb_nodes),
-                                 static_cast<double>(a.jcbb_bounded), static_cast<double>(a.index_queries)}));
+                                 static_cast<double>(a.jcbb_bounded), static_cast<double>(a.index_queries),
+                                 static_cast<double>(a.ambiguous_readings), static_cast<double>(a.disputed_pairings)}));
   for (std::size_t i = 0; i < health_.size(); ++i) health_[i].save(run, "health_" + std::to_string(i) + "_");
   covariance_health_.save(run, "covariance_health_");
   // Loop closing (slam_loop_closure.cpp): its history and counters, and per
@@ -285,7 +286,11 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     const Eigen::MatrixXd& counters = get_state(run, "counters", 1, 10, "run state");
     const Eigen::MatrixXd& seconds = get_state(run, "seconds", 1, 7, "run state");
     const Eigen::MatrixXd& nees = get_state(run, "nees", -1, 1, "run state");
-    const Eigen::MatrixXd& association = get_state(run, "association", 1, 4, "run state");
+    // 4 counters, or 6 since association.refuse_ambiguous (2026-11-29).
+    const Eigen::MatrixXd& association = get_state(run, "association", 1, -1, "run state");
+    if (association.cols() != 4 && association.cols() != 6)
+      throw std::invalid_argument("run state: association has " + std::to_string(association.cols()) +
+                                  " columns, expected 4 or 6");
     const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 14, "run state");
     const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, 10, "run state");
     const Eigen::MatrixXd& pending_ids = get_state(run, "loop_pending_ids", -1, 1, "run state");
@@ -361,6 +366,10 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     a.jcbb_nodes = integer_at(association, 1, 0, 1e15, "jcbb_nodes");
     a.jcbb_bounded = integer_at(association, 2, 0, 1e15, "jcbb_bounded");
     a.index_queries = integer_at(association, 3, 0, 1e15, "index_queries");
+    if (association.cols() == 6) {
+      a.ambiguous_readings = integer_at(association, 4, 0, 1e15, "ambiguous_readings");
+      a.disputed_pairings = integer_at(association, 5, 0, 1e15, "disputed_pairings");
+    }
     s.loop_attempts = integer_at(loops, 3, 0, 1e15, "loop_attempts");
     s.loop_closures = integer_at(loops, 4, 0, 1e15, "loop_closures");
     s.loop_ambiguous = integer_at(loops, 5, 0, 1e15, "loop_ambiguous");

@@ -36,7 +36,7 @@ const std::vector<std::string> kMapModes = {"mapping", "localize", "extend"};
 const std::vector<std::string> kMapStarts = {"config", "map_end"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
-                                                   "join_distance", "method", "jcbb_max_nodes", "spatial_index",
+                                                   "join_distance", "method", "jcbb_max_nodes", "refuse_ambiguous", "spatial_index",
                                                    "index_cell_size", "loop_closing", "loop_local_path",
                                                    "loop_min_gap_path", "loop_drift_per_metre",
                                                    "loop_drift_deg_per_metre", "loop_min_matches",
@@ -525,6 +525,7 @@ AssociationConfig Reader::read_association(const Item* item) const {
     association.method = choice(*f, kAssociationMethods) == 1 ? AssociationConfig::Method::Jcbb
                                                               : AssociationConfig::Method::NearestNeighbour;
   if (const Item* f = find(fields, "jcbb_max_nodes")) association.jcbb_max_nodes = integer(*f, 1);
+  if (const Item* f = find(fields, "refuse_ambiguous")) association.refuse_ambiguous = boolean(*f);
   if (const Item* f = find(fields, "spatial_index")) association.spatial_index = boolean(*f);
   if (const Item* f = find(fields, "index_cell_size")) association.index_cell_size = number(*f, 0.0);
   if (const Item* f = find(fields, "loop_closing")) association.loop_closing = boolean(*f);
@@ -741,6 +742,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "join_distance" << YAML::Value << format_number(c.association.join_distance);
   out << YAML::Key << "method" << YAML::Value << association_method_name(c.association.method);
   out << YAML::Key << "jcbb_max_nodes" << YAML::Value << std::to_string(c.association.jcbb_max_nodes);
+  out << YAML::Key << "refuse_ambiguous" << YAML::Value << yes_no(c.association.refuse_ambiguous);
   out << YAML::Key << "spatial_index" << YAML::Value << yes_no(c.association.spatial_index);
   out << YAML::Key << "index_cell_size" << YAML::Value << format_number(c.association.index_cell_size);
   out << YAML::Key << "loop_closing" << YAML::Value << yes_no(c.association.loop_closing);

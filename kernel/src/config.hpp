@@ -94,6 +94,11 @@ struct AssociationConfig {
   /// JCBB visits at most this many interpretation-tree nodes per reading,
   /// then falls back to nearest neighbour (counted in the summary).
   std::int64_t jcbb_max_nodes = 100000;
+  /// JCBB only: a pairing is used only when no other jointly compatible
+  /// hypothesis with as many pairings contradicts it (associate() drops the
+  /// disputed ones; they start no feature either). Without it JCBB takes the
+  /// hypothesis with the smallest joint distance however close a rival is.
+  bool refuse_ambiguous = false;
   /// Sensors with a max_range look their features up in a uniform grid over
   /// the features' planar bounding boxes instead of scanning the whole map
   /// (same result); false scans everything.

@@ -416,6 +416,10 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
   y << YAML::Key << "jcbb_readings" << YAML::Value << as.jcbb_readings;
   y << YAML::Key << "jcbb_nodes" << YAML::Value << as.jcbb_nodes;
   y << YAML::Key << "jcbb_bounded" << YAML::Value << as.jcbb_bounded;
+  if (slam.config().association.refuse_ambiguous) {
+    y << YAML::Key << "ambiguous_readings" << YAML::Value << as.ambiguous_readings;
+    y << YAML::Key << "disputed_pairings" << YAML::Value << as.disputed_pairings;
+  }
   if (slam.config().association.loop_closing) {
     y << YAML::Key << "loop_closing" << YAML::Value << YAML::BeginMap;
     y << YAML::Key << "searches" << YAML::Value << st.loop_attempts;
@@ -591,7 +595,12 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
   const AssociationStats& as = slam.association_stats();
   if (as.jcbb_readings > 0)
     os << "  joint compatibility: " << as.jcbb_readings << " readings, " << as.jcbb_nodes << " tree nodes, "
-       << as.jcbb_bounded << " gave up at jcbb_max_nodes (nearest neighbour used)\n";
+       << as.jcbb_bounded << " gave up at jcbb_max_nodes (nearest neighbour used)"
+       << (slam.config().association.refuse_ambiguous
+               ? ", " + std::to_string(as.disputed_pairings) + " pairings in " + std::to_string(as.ambiguous_readings) +
+                     " readings not used: a rival hypothesis fitted as well"
+               : std::string())
+       << "\n";
   if (slam.config().association.loop_closing)
     os << "  loop closing by map matching: " << st.loop_closures << " closures (" << st.loop_merged
        << " features merged) in " << st.loop_attempts << " searches, " << st.loop_ambiguous

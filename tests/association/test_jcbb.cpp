@@ -270,4 +270,190 @@ TEST(Jcbb, StopsAtTheNodeBound) {
   EXPECT_GT(full.nodes, 50);
 }
 
+// ---- Rivals (association.refuse_ambiguous) ----------------------------------
+
+/// Every hypothesis the interpretation tree holds with the most pairings,
+/// jointly compatible at every prefix (as brute_force walks it).
+std::vector<std::vector<int>> all_largest(const World& w, const std::vector<Candidate>& cands, int measurements,
+                                          double p) {
+  std::vector<std::vector<int>> out;
+  std::vector<int> current;
+  std::vector<bool> used(64, false);
+  std::size_t most = 0;
+  const auto recurse = [&](auto&& self, int m) -> void {
+    if (m == measurements) {
+      if (current.size() > most) {
+        most = current.size();
+        out.clear();
+      }
+      if (current.size() == most) out.push_back(current);
+      return;
+    }
+    for (std::size_t c = 0; c < cands.size(); ++c) {
+      if (cands[c].measurement != m || used[cands[c].feature] || cands[c].tentative) continue;
+      current.push_back(static_cast<int>(c));
+      if (w.joint_d2(cands, current) <= chi2_quantile(p, 2 * static_cast<int>(current.size()))) {
+        used[cands[c].feature] = true;
+        self(self, m + 1);
+        used[cands[c].feature] = false;
+      }
+      current.pop_back();
+    }
+    self(self, m + 1);
+  };
+  recurse(recurse, 0);
+  return out;
+}
+
+/// The pairings of `best` that some hypothesis of `largest` leaves out.
+std::vector<int> expected_disputed(const std::vector<int>& best, const std::vector<std::vector<int>>& largest) {
+  std::vector<int> out;
+  for (int c : best)
+    for (const std::vector<int>& h : largest)
+      if (std::find(h.begin(), h.end(), c) == h.end()) {
+        out.push_back(c);
+        break;
+      }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// A row of posts 1 m apart seen under a lateral uncertainty of 1.5 m: the
+// two measured posts fit posts (0, 1) and, shifted by one spacing, posts
+// (1, 2) — both jointly compatible with two pairings. Plain JCBB takes the
+// one of smaller D²; with rivals both pairings are disputed.
+TEST(JcbbRivals, ARepeatedStructureUnderALargeUncertaintyDisputesEveryPairing) {
+  const World w(3, 1.5, 0.01);
+  const std::vector<Eigen::Vector2d> f = {{0.0, 0.0}, {1.0, 0.0}, {2.0, 0.0}};
+  const Eigen::Vector2d offset(0.45, 0.0);  // the truth: posts 0 and 1, seen 0.45 m further on
+  std::vector<Candidate> cands;
+  for (int m = 0; m < 2; ++m)
+    for (int j = 0; j < 3; ++j) {
+      const Candidate c = w.candidate(m, j, f[m] + offset - f[j]);
+      if (c.d2 <= chi2_quantile(0.99, 2)) cands.push_back(c);
+    }
+  const JcbbResult plain = joint_compatibility(cands, w.marginal(), {0.99, 1000});
+  ASSERT_EQ(plain.chosen.size(), 2u);
+  EXPECT_TRUE(plain.disputed.empty()) << "rivals are looked for only when asked";
+  EXPECT_EQ(plain.rival_nodes, 0);
+
+  JcbbOptions options{0.99, 1000};
+  options.find_rivals = true;
+  const JcbbResult jc = joint_compatibility(cands, w.marginal(), options);
+  EXPECT_EQ(pairs(cands, jc.chosen), pairs(cands, plain.chosen)) << "the best hypothesis is the same";
+  EXPECT_FALSE(jc.rivals_bounded);
+  std::vector<int> chosen = jc.chosen;
+  std::sort(chosen.begin(), chosen.end());
+  EXPECT_EQ(jc.disputed, chosen) << "the shifted hypothesis contradicts both pairings";
+  EXPECT_GT(jc.rival_nodes, 0);
+
+  // The same reading with the robot known to 5 cm: the shift is out of every
+  // gate and nothing is disputed.
+  const World sure(3, 0.05, 0.01);
+  std::vector<Candidate> near;
+  for (int m = 0; m < 2; ++m)
+    for (int j = 0; j < 3; ++j) {
+      const Candidate c = sure.candidate(m, j, f[m] + Eigen::Vector2d(0.03, 0.0) - f[j]);
+      if (c.d2 <= chi2_quantile(0.99, 2)) near.push_back(c);
+    }
+  const JcbbResult certain = joint_compatibility(near, sure.marginal(), options);
+  EXPECT_EQ(certain.chosen.size(), 2u);
+  EXPECT_TRUE(certain.disputed.empty());
+}
+
+// Three posts well apart and a fourth 4 cm from the third (a feature mapped
+// twice): the third measurement fits either copy, so its pairing is
+// disputed; the two others are not, whatever the third does.
+TEST(JcbbRivals, OnlyThePairingARivalChangesIsDisputed) {
+  const World w(4, 0.1, 0.01);
+  const std::vector<Eigen::Vector2d> f = {{0.0, 0.0}, {3.0, 0.0}, {0.0, 3.0}, {0.04, 3.0}};
+  const Eigen::Vector2d offset(0.02, -0.03);
+  std::vector<Candidate> cands;
+  for (int m = 0; m < 3; ++m)
+    for (int j = 0; j < 4; ++j) {
+      const Candidate c = w.candidate(m, j, f[m] + offset - f[j]);
+      if (c.d2 <= chi2_quantile(0.99, 2)) cands.push_back(c);
+    }
+  JcbbOptions options{0.99, 1000};
+  options.find_rivals = true;
+  const JcbbResult jc = joint_compatibility(cands, w.marginal(), options);
+  ASSERT_EQ(jc.chosen.size(), 3u);
+  ASSERT_EQ(jc.disputed.size(), 1u);
+  EXPECT_EQ(cands[jc.disputed[0]].measurement, 2);
+}
+
+// The reading where JCBB corrects nearest neighbour: the crossed pairs are
+// jointly incompatible, so the right hypothesis has no rival.
+TEST(JcbbRivals, AJointlyIncompatibleAlternativeIsNoRival) {
+  const World w(2, 1.0, 0.01);
+  const Eigen::Vector2d f0(0.0, 0.0), f1(1.0, 0.0), offset(-0.8, 0.0);
+  std::vector<Candidate> cands;
+  for (int m = 0; m < 2; ++m)
+    for (int j = 0; j < 2; ++j) cands.push_back(w.candidate(m, j, (m == 0 ? f0 : f1) + offset - (j == 0 ? f0 : f1)));
+  JcbbOptions options{0.99, 1000};
+  options.find_rivals = true;
+  const JcbbResult jc = joint_compatibility(cands, w.marginal(), options);
+  EXPECT_EQ(pairs(cands, jc.chosen), (std::vector<std::pair<int, int>>{{0, 0}, {1, 1}}));
+  EXPECT_TRUE(jc.disputed.empty());
+}
+
+// Random readings (clusters, clutter, uncertainty large enough for shifted
+// fits): the disputed pairings are exactly those of the best hypothesis that
+// some other largest jointly compatible hypothesis leaves out.
+TEST(JcbbRivals, MatchExhaustiveEnumerationOnRandomReadings) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uni(-1.5, 1.5);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  const double gate = chi2_quantile(0.99, 2);
+  int with_disputes = 0, without = 0;
+  for (int trial = 0; trial < 80; ++trial) {
+    const int nf = 5, nm = 5;
+    const World w(nf, trial % 2 == 0 ? 0.8 : 0.2, 0.02);
+    std::vector<Eigen::Vector2d> f(nf);
+    for (Eigen::Vector2d& p : f) p = {uni(rng), uni(rng)};
+    const Eigen::Vector2d offset(uni(rng) * 0.4, uni(rng) * 0.4);
+    std::vector<Candidate> cands;
+    for (int m = 0; m < nm; ++m) {
+      const Eigen::Vector2d z = m < nf - 1 ? Eigen::Vector2d(f[m] + offset + Eigen::Vector2d(noise(rng), noise(rng)))
+                                           : Eigen::Vector2d(uni(rng), uni(rng));
+      for (int j = 0; j < nf; ++j) {
+        const Candidate c = w.candidate(m, j, z - f[j]);
+        if (c.d2 <= gate) cands.push_back(c);
+      }
+    }
+    JcbbOptions options{0.99, 1000000};
+    options.find_rivals = true;
+    const JcbbResult jc = joint_compatibility(cands, w.marginal(), options);
+    ASSERT_FALSE(jc.bounded);
+    ASSERT_FALSE(jc.rivals_bounded);
+    const std::vector<std::vector<int>> largest = all_largest(w, cands, nm, 0.99);
+    EXPECT_EQ(jc.disputed, expected_disputed(jc.chosen, largest)) << "trial " << trial;
+    (jc.disputed.empty() ? without : with_disputes) += 1;
+  }
+  EXPECT_GT(with_disputes, 5) << "the trials exercise rivals";
+  EXPECT_GT(without, 5);
+}
+
+// A rival search that runs out of nodes cannot vouch for any pairing: all
+// are reported disputed.
+TEST(JcbbRivals, ABoundedRivalSearchDisputesEverything) {
+  const int n = 6;
+  World w(n, 2.0, 0.3);
+  w.meas_sigma = 0.3;
+  std::vector<Candidate> cands;
+  for (int m = 0; m < n; ++m)
+    for (int f = 0; f < n; ++f) cands.push_back(w.candidate(m, f, {0.01 * (m - f), 0.02 * (f + m)}));
+  JcbbOptions options{0.99, 10000000};
+  options.find_rivals = true;
+  const JcbbResult full = joint_compatibility(cands, w.marginal(), options);
+  ASSERT_FALSE(full.bounded);
+  EXPECT_FALSE(full.rivals_bounded);
+  EXPECT_EQ(full.disputed.size(), static_cast<std::size_t>(n)) << "every permutation fits: all disputed";
+  options.max_rival_nodes = 3;
+  const JcbbResult cut = joint_compatibility(cands, w.marginal(), options);
+  ASSERT_FALSE(cut.bounded);
+  EXPECT_TRUE(cut.rivals_bounded);
+  EXPECT_EQ(cut.disputed.size(), static_cast<std::size_t>(n));
+}
+
 }  // namespace

@@ -229,6 +229,15 @@ TEST(Checkpoint, SimPointsObservabilityConstrainedEkfAndCekf) {
   }
 }
 
+// Joint compatibility with the rival search (association.refuse_ambiguous):
+// its counters are in the summary that the comparison reads.
+TEST(Checkpoint, SimPointsJcbbWithRivals) {
+  expect_resume_equals_uninterrupted({"sim_points.yaml", "ekf", 1500, 3000, [](RunConfig& c) {
+                                        c.association.method = AssociationConfig::Method::Jcbb;
+                                        c.association.refuse_ambiguous = true;
+                                      }});
+}
+
 bool have_intel() {
   if (!fs::exists(datasets() / "intel_lab" / "intel_910_scans.txt")) return false;
   setenv("MSPACE_DATA", datasets().c_str(), 0);
