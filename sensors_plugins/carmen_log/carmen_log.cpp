@@ -2,12 +2,15 @@
 #include "carmen_log.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <fstream>
 #include <numbers>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
+
+#include <Eigen/Cholesky>
 
 #include "mspace/pose.hpp"
 #include "mspace/records.hpp"
@@ -153,6 +156,7 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   check_options.gap_factor = params.get_double("scan_match_gap_factor");
   const std::vector<bool> gaps = scan_matching::logging_gaps(times, check_options.gap_factor);
   covariances_.assign(n, Eigen::Matrix3d::Zero());
+  std::vector<Eigen::Matrix3d> match_covariance(n, Eigen::Matrix3d::Zero());  // per scan i: of the match to it
   matched[0] = log_.scans[0].odometry;
   auto points_of = [&](const Scan& s) { return scan_matching::scan_to_points(s.ranges, s.bearings, max_range); };
   local_map.add(0, points_of(log_.scans[0]), matched[0]);
@@ -191,6 +195,7 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
     if (r.match.ok) {
       source[i] = scan_matching::IncrementSource::matched;
       residuals.push_back(r.match.rms);
+      match_covariance[i] = r.covariance;
       if (with_covariance) covariances_[i] = r.covariance;
       correlative += r.match.correlative ? 1 : 0;
     } else {
@@ -240,12 +245,41 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
       speed = speeds[speeds.size() / 2];
     }
   }
+  // With scan_match_fuse_wheels, a match the wheels contradict is not thrown
+  // away when the two agree within both their covariances: the spread the
+  // veto uses is the same in every direction, while a match along a
+  // corridor is weak along it and strong across. The increment is then the
+  // two combined by their information — the corrected wheels w with C_w
+  // (the wheel model), the match m with C_m (its own, calibrated to NEES 3):
+  //   e = m − w,  S = C_m + C_w,  χ² = eᵀS⁻¹e ≤ scan_match_wheel_gate,
+  //   increment = w + C_w S⁻¹ e,  covariance = C_w − C_w S⁻¹ C_w,
+  // so the match decides where it is strong and the wheels where it is weak.
+  fuse_wheels_ = params.get_bool("scan_match_fuse_wheels");
+  const bool fuse = fuse_wheels_ && model.used > 0;
+  std::size_t fused = 0;
   for (std::size_t i = 1; i < n; ++i) {
     const bool kept = check.source[i - 1] == scan_matching::IncrementSource::matched;
     Eigen::Vector3d increment = laser[i - 1];
     if (!kept) {
       covariances_[i].setZero();
       increment = wheel[i - 1];
+      if (fuse && check.source[i - 1] == scan_matching::IncrementSource::inconsistent &&
+          !match_covariance[i].isZero()) {
+        const Eigen::Vector3d w = model.correct_along(wheel_steps[i]);
+        const Eigen::Matrix3d C_w = model.covariance_along(wheel_steps[i]);
+        Eigen::Vector3d e = laser[i - 1] - w;
+        e[2] = std::remainder(e[2], 2.0 * std::numbers::pi);
+        const Eigen::LDLT<Eigen::Matrix3d> S(match_covariance[i] + C_w);
+        if (S.info() == Eigen::Success && S.isPositive() && e.dot(S.solve(e)) <= check_options.gate) {
+          increment = w + C_w * S.solve(e);
+          covariances_[i] = C_w - C_w * S.solve(C_w);
+          covariances_[i] = 0.5 * (covariances_[i] + covariances_[i].transpose()).eval();
+          ++fused;
+          wheel_check_.source[i - 1] = scan_matching::IncrementSource::fused;
+          log_.scans[i].odometry = apply_increment(log_.scans[i - 1].odometry, increment);
+          continue;
+        }
+      }
       if (model.used > 0 && (!gaps[i] || wheel_steps[i].size() > 1)) {
         increment = model.correct_along(wheel_steps[i]);
         covariances_[i] = model.covariance_along(wheel_steps[i]);
@@ -279,10 +313,13 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   using scan_matching::IncrementSource;
   const std::size_t kept = check.count(IncrementSource::matched), failed = check.count(IncrementSource::failed),
                     gap = check.count(IncrementSource::gap), inconsistent = check.count(IncrementSource::inconsistent);
-  log.info("laser odometry: ", kept, " of ", n - 1, " increments scan-matched (median residual ", median * 1000.0,
-           " mm, ", correlative, " after a correlative search, ", disagreed,
-           " replaced by a tight match from the wheels); the wheel odometry kept for ", failed, " failed matches, ",
-           gap, " increments across logging gaps and ", inconsistent,
+  assert(fused == check.count(IncrementSource::fused));
+  log.info("laser odometry: ", kept + fused, " of ", n - 1, " increments scan-matched (median residual ",
+           median * 1000.0, " mm, ", correlative, " after a correlative search, ", disagreed,
+           " replaced by a tight match from the wheels",
+           fuse ? ", " + std::to_string(fused) + " combined with the wheels by their covariances" : std::string(),
+           "); the wheel odometry kept for ", failed, " failed matches, ", gap,
+           " increments across logging gaps and ", inconsistent,
            " matches the wheels contradict (spread measured on this log: ", check.sigma_xy * 1000.0, " mm and ",
            check.sigma_theta * 180.0 / std::numbers::pi, " deg per sqrt(m), gate chi2 ", check_options.gate, ")");
   if ((failed + inconsistent) * 20 > n)
@@ -360,6 +397,11 @@ std::vector<ParamSpec> CarmenLogSource::param_specs() {
                    "of that difference measured on the whole log (robust, per sqrt(m) of path): a match beyond "
                    "it falls back to the wheels and is counted (25.90: 1e-5 for a Gaussian); 0: no check",
                    0.0),
+      param_bool("scan_match_fuse_wheels", false,
+                 "a match the wheels contradict (scan_match_wheel_gate) is combined with the corrected wheel "
+                 "increment by their covariances (the match's and the wheel model's) when the two agree within "
+                 "them — a match weak along a corridor keeps what it measured across — instead of being dropped; "
+                 "needs scan_match_wheel_model"),
       param_bool("scan_match_wheel_model", true,
                  "increments that fall back to the wheels (failed or vetoed matches, logging gaps) are corrected "
                  "for the wheels' scale, turn scale and drift per metre and carry the wheels' own noise (a random "
@@ -467,6 +509,7 @@ std::vector<std::pair<std::string, double>> CarmenLogSource::figures() const {
        {IncrementSource::matched, IncrementSource::failed, IncrementSource::gap, IncrementSource::inconsistent})
     out.emplace_back(std::string("laser_odometry_") + scan_matching::to_string(s),
                      static_cast<double>(wheel_check_.count(s)));
+  if (fuse_wheels_) out.emplace_back("laser_odometry_fused", static_cast<double>(wheel_check_.count(IncrementSource::fused)));
   out.emplace_back("laser_odometry_wheel_spread_m_per_sqrt_m", wheel_check_.sigma_xy);
   out.emplace_back("laser_odometry_wheel_spread_deg_per_sqrt_m", wheel_check_.sigma_theta * 180.0 / std::numbers::pi);
   if (wheel_model_.used > 0) {

@@ -69,6 +69,10 @@ class CarmenLogSource final : public DataSource {
   const std::vector<scan_matching::IncrementSource>& increment_sources() const { return wheel_check_.source; }
   /// With `odometry: scan_matched`: the wheels' check of the matches (spread measured, χ² of each).
   const scan_matching::WheelCheckResult& wheel_check() const { return wheel_check_; }
+  /// Per scan: the covariance of the odometry increment to it, where the
+  /// laser odometry gives one (fallbacks under the wheel model, fused
+  /// increments, matches with scan_match_covariance); zero elsewhere.
+  const std::vector<Eigen::Matrix3d>& increment_covariances() const { return covariances_; }
   /// The wheels' errors as the matched increments measured them, used for
   /// the increments that fall back to the wheels (wheel_check.hpp).
   const scan_matching::WheelModel& wheel_model() const { return wheel_model_; }
@@ -86,6 +90,7 @@ class CarmenLogSource final : public DataSource {
   Logger* log_out_ = nullptr;
   Eigen::Vector3d mount_ = Eigen::Vector3d::Zero();
   scan_matching::WheelCheckResult wheel_check_;
+  bool fuse_wheels_ = false;  ///< scan_match_fuse_wheels
   scan_matching::WheelModel wheel_model_;
   std::vector<Eigen::Matrix3d> covariances_;  ///< per scan: the laser odometry increment's covariance (0: none)
 };

@@ -27,6 +27,7 @@ const char* to_string(IncrementSource source) {
     case IncrementSource::failed: return "failed";
     case IncrementSource::gap: return "gap";
     case IncrementSource::inconsistent: return "inconsistent";
+    case IncrementSource::fused: return "fused";
   }
   return "?";
 }

@@ -62,9 +62,10 @@ enum class IncrementSource {
   failed,        ///< the matcher itself gave up (too few pairs, large residual): wheels
   gap,           ///< across a logging gap: wheels, not matched
   inconsistent,  ///< the wheels contradict the match beyond their spread: wheels
+  fused,         ///< contradicted by the spread, but within both covariances: the two combined (scan_match_fuse_wheels)
 };
 
-/// Name for logs and summaries ("matched", "failed", "gap", "inconsistent").
+/// Name for logs and summaries ("matched", "failed", "gap", "inconsistent", "fused").
 const char* to_string(IncrementSource source);
 
 /// Which increments span a logging gap: `times` are the scan times; entry i
