@@ -165,32 +165,22 @@ TEST(Jcbb, IgnoresTentativeCandidates) {
   EXPECT_EQ(none.nodes, 0);
 }
 
-/// The best hypothesis by exhaustive enumeration of the interpretation tree:
-/// most pairings, then smallest joint D², jointly compatible throughout.
-std::vector<int> brute_force(const World& w, const std::vector<Candidate>& cands, int measurements, double p,
-                             std::int64_t& leaves) {
-  std::vector<int> best, current;
-  int best_pairings = -1;
-  double best_d2 = std::numeric_limits<double>::infinity();
+/// Calls visit(h) for every leaf h of the interpretation tree over the
+/// non-tentative candidates (each measurement paired with one of its
+/// candidates or with nothing, each feature used once) whose every prefix is
+/// jointly compatible (D² grows with pairings, but so does the threshold).
+template <class Visit>
+void for_each_hypothesis(const World& w, const std::vector<Candidate>& cands, int measurements, double p,
+                         Visit&& visit) {
+  std::vector<int> current;
   std::vector<bool> used(64, false);
-  leaves = 0;
   const auto recurse = [&](auto&& self, int m) -> void {
     if (m == measurements) {
-      ++leaves;
-      const double d2 = current.empty() ? 0.0 : w.joint_d2(cands, current);
-      if (!current.empty() && d2 > chi2_quantile(p, 2 * static_cast<int>(current.size()))) return;
-      const int n = static_cast<int>(current.size());
-      if (n > best_pairings || (n == best_pairings && d2 < best_d2)) {
-        best = current;
-        best_pairings = n;
-        best_d2 = d2;
-      }
+      visit(current);
       return;
     }
     for (std::size_t c = 0; c < cands.size(); ++c) {
-      if (cands[c].measurement != m || used[cands[c].feature]) continue;
-      // Every prefix must be jointly compatible too (D² grows with pairings
-      // but so does the threshold).
+      if (cands[c].measurement != m || used[cands[c].feature] || cands[c].tentative) continue;
       current.push_back(static_cast<int>(c));
       if (w.joint_d2(cands, current) <= chi2_quantile(p, 2 * static_cast<int>(current.size()))) {
         used[cands[c].feature] = true;
@@ -202,7 +192,50 @@ std::vector<int> brute_force(const World& w, const std::vector<Candidate>& cands
     self(self, m + 1);
   };
   recurse(recurse, 0);
+}
+
+/// The best hypothesis by exhaustive enumeration of the interpretation tree:
+/// most pairings, then smallest joint D², jointly compatible throughout.
+std::vector<int> brute_force(const World& w, const std::vector<Candidate>& cands, int measurements, double p,
+                             std::int64_t& leaves) {
+  std::vector<int> best;
+  int best_pairings = -1;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  leaves = 0;
+  for_each_hypothesis(w, cands, measurements, p, [&](const std::vector<int>& h) {
+    ++leaves;
+    const double d2 = h.empty() ? 0.0 : w.joint_d2(cands, h);
+    const int n = static_cast<int>(h.size());
+    if (n > best_pairings || (n == best_pairings && d2 < best_d2)) {
+      best = h;
+      best_pairings = n;
+      best_d2 = d2;
+    }
+  });
   return best;
+}
+
+/// A random reading: nf features in a 3 m square, measurement m of feature m
+/// under one robot offset with 5 cm noise, the last measurement clutter
+/// somewhere; the candidates that pass the individual gate.
+std::vector<Candidate> random_reading(const World& w, int nf, int nm, std::mt19937& rng) {
+  std::uniform_real_distribution<double> uni(-1.5, 1.5);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  const double gate = chi2_quantile(0.99, 2);
+  std::vector<Eigen::Vector2d> f(static_cast<std::size_t>(nf));
+  for (Eigen::Vector2d& p : f) p = {uni(rng), uni(rng)};
+  const Eigen::Vector2d offset(uni(rng) * 0.4, uni(rng) * 0.4);
+  std::vector<Candidate> cands;
+  for (int m = 0; m < nm; ++m) {
+    const Eigen::Vector2d z = m < nf - 1 ? Eigen::Vector2d(f[static_cast<std::size_t>(m)] + offset +
+                                                           Eigen::Vector2d(noise(rng), noise(rng)))
+                                         : Eigen::Vector2d(uni(rng), uni(rng));
+    for (int j = 0; j < nf; ++j) {
+      const Candidate c = w.candidate(m, j, z - f[static_cast<std::size_t>(j)]);
+      if (c.d2 <= gate) cands.push_back(c);
+    }
+  }
+  return cands;
 }
 
 // Random clusters of features measured under a shared robot offset, with
@@ -210,27 +243,12 @@ std::vector<int> brute_force(const World& w, const std::vector<Candidate>& cands
 // nodes than the interpretation tree has leaves.
 TEST(Jcbb, MatchesExhaustiveSearchOnRandomReadings) {
   std::mt19937 rng(7);
-  std::uniform_real_distribution<double> uni(-1.5, 1.5);
-  std::normal_distribution<double> noise(0.0, 0.05);
-  const double gate = chi2_quantile(0.99, 2);
   int checked = 0;
   std::int64_t nodes = 0, leaves_total = 0;
   for (int trial = 0; trial < 60; ++trial) {
     const int nf = 5, nm = 5;
     const World w(nf, 0.5, 0.02);
-    std::vector<Eigen::Vector2d> f(nf);
-    for (Eigen::Vector2d& p : f) p = {uni(rng), uni(rng)};
-    const Eigen::Vector2d offset(uni(rng) * 0.4, uni(rng) * 0.4);
-    std::vector<Candidate> cands;
-    for (int m = 0; m < nm; ++m) {
-      // Measurement m sees feature m (the last one is clutter somewhere).
-      const Eigen::Vector2d z = m < nf - 1 ? Eigen::Vector2d(f[m] + offset + Eigen::Vector2d(noise(rng), noise(rng)))
-                                           : Eigen::Vector2d(uni(rng), uni(rng));
-      for (int j = 0; j < nf; ++j) {
-        const Candidate c = w.candidate(m, j, z - f[j]);
-        if (c.d2 <= gate) cands.push_back(c);
-      }
-    }
+    const std::vector<Candidate> cands = random_reading(w, nf, nm, rng);
     std::int64_t leaves = 0;
     const std::vector<int> expected = brute_force(w, cands, nm, 0.99, leaves);
     const JcbbResult jc = joint_compatibility(cands, w.marginal(), {0.99, 1000000});
@@ -272,36 +290,18 @@ TEST(Jcbb, StopsAtTheNodeBound) {
 
 // ---- Rivals (association.refuse_ambiguous) ----------------------------------
 
-/// Every hypothesis the interpretation tree holds with the most pairings,
-/// jointly compatible at every prefix (as brute_force walks it).
+/// Every hypothesis the interpretation tree holds with the most pairings.
 std::vector<std::vector<int>> all_largest(const World& w, const std::vector<Candidate>& cands, int measurements,
                                           double p) {
   std::vector<std::vector<int>> out;
-  std::vector<int> current;
-  std::vector<bool> used(64, false);
   std::size_t most = 0;
-  const auto recurse = [&](auto&& self, int m) -> void {
-    if (m == measurements) {
-      if (current.size() > most) {
-        most = current.size();
-        out.clear();
-      }
-      if (current.size() == most) out.push_back(current);
-      return;
+  for_each_hypothesis(w, cands, measurements, p, [&](const std::vector<int>& h) {
+    if (h.size() > most) {
+      most = h.size();
+      out.clear();
     }
-    for (std::size_t c = 0; c < cands.size(); ++c) {
-      if (cands[c].measurement != m || used[cands[c].feature] || cands[c].tentative) continue;
-      current.push_back(static_cast<int>(c));
-      if (w.joint_d2(cands, current) <= chi2_quantile(p, 2 * static_cast<int>(current.size()))) {
-        used[cands[c].feature] = true;
-        self(self, m + 1);
-        used[cands[c].feature] = false;
-      }
-      current.pop_back();
-    }
-    self(self, m + 1);
-  };
-  recurse(recurse, 0);
+    if (h.size() == most) out.push_back(h);
+  });
   return out;
 }
 
@@ -402,25 +402,11 @@ TEST(JcbbRivals, AJointlyIncompatibleAlternativeIsNoRival) {
 // some other largest jointly compatible hypothesis leaves out.
 TEST(JcbbRivals, MatchExhaustiveEnumerationOnRandomReadings) {
   std::mt19937 rng(11);
-  std::uniform_real_distribution<double> uni(-1.5, 1.5);
-  std::normal_distribution<double> noise(0.0, 0.05);
-  const double gate = chi2_quantile(0.99, 2);
   int with_disputes = 0, without = 0;
   for (int trial = 0; trial < 80; ++trial) {
     const int nf = 5, nm = 5;
     const World w(nf, trial % 2 == 0 ? 0.8 : 0.2, 0.02);
-    std::vector<Eigen::Vector2d> f(nf);
-    for (Eigen::Vector2d& p : f) p = {uni(rng), uni(rng)};
-    const Eigen::Vector2d offset(uni(rng) * 0.4, uni(rng) * 0.4);
-    std::vector<Candidate> cands;
-    for (int m = 0; m < nm; ++m) {
-      const Eigen::Vector2d z = m < nf - 1 ? Eigen::Vector2d(f[m] + offset + Eigen::Vector2d(noise(rng), noise(rng)))
-                                           : Eigen::Vector2d(uni(rng), uni(rng));
-      for (int j = 0; j < nf; ++j) {
-        const Candidate c = w.candidate(m, j, z - f[j]);
-        if (c.d2 <= gate) cands.push_back(c);
-      }
-    }
+    const std::vector<Candidate> cands = random_reading(w, nf, nm, rng);
     JcbbOptions options{0.99, 1000000};
     options.find_rivals = true;
     const JcbbResult jc = joint_compatibility(cands, w.marginal(), options);
