@@ -36,8 +36,8 @@ const std::vector<std::string> kMapModes = {"mapping", "localize", "extend"};
 const std::vector<std::string> kMapStarts = {"config", "map_end"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
-                                                   "join_distance", "method", "jcbb_max_nodes", "refuse_ambiguous", "spatial_index",
-                                                   "index_cell_size", "loop_closing", "loop_local_path",
+                                                   "join_distance", "method", "jcbb_max_nodes", "refuse_ambiguous",
+                                                   "spatial_index", "index_cell_size", "loop_closing", "loop_local_path",
                                                    "loop_min_gap_path", "loop_drift_per_metre",
                                                    "loop_drift_deg_per_metre", "loop_min_matches",
                                                    "loop_ambiguity_ratio", "loop_scans"};

@@ -2,15 +2,12 @@
 #include "carmen_log.hpp"
 
 #include <algorithm>
-#include <cassert>
 #include <cmath>
 #include <fstream>
 #include <numbers>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
-
-#include <Eigen/Cholesky>
 
 #include "mspace/pose.hpp"
 #include "mspace/records.hpp"
@@ -246,41 +243,29 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
     }
   }
   // With scan_match_fuse_wheels, a match the wheels contradict is not thrown
-  // away when the two agree within both their covariances: the spread the
-  // veto uses is the same in every direction, while a match along a
-  // corridor is weak along it and strong across. The increment is then the
-  // two combined by their information — the corrected wheels w with C_w
-  // (the wheel model), the match m with C_m (its own, calibrated to NEES 3):
-  //   e = m − w,  S = C_m + C_w,  χ² = eᵀS⁻¹e ≤ scan_match_wheel_gate,
-  //   increment = w + C_w S⁻¹ e,  covariance = C_w − C_w S⁻¹ C_w,
-  // so the match decides where it is strong and the wheels where it is weak.
+  // away when the two agree within both their covariances (the veto's spread
+  // is the same in every direction; a match along a corridor is weak along
+  // it and strong across): it is combined with the corrected wheels
+  // (combine_increments; the match's covariance is its own, calibrated to
+  // NEES 3, the wheels' the wheel model's).
   fuse_wheels_ = params.get_bool("scan_match_fuse_wheels");
   const bool fuse = fuse_wheels_ && model.used > 0;
-  std::size_t fused = 0;
   for (std::size_t i = 1; i < n; ++i) {
     const bool kept = check.source[i - 1] == scan_matching::IncrementSource::matched;
     Eigen::Vector3d increment = laser[i - 1];
     if (!kept) {
       covariances_[i].setZero();
       increment = wheel[i - 1];
-      if (fuse && check.source[i - 1] == scan_matching::IncrementSource::inconsistent &&
-          !match_covariance[i].isZero()) {
-        const Eigen::Vector3d w = model.correct_along(wheel_steps[i]);
-        const Eigen::Matrix3d C_w = model.covariance_along(wheel_steps[i]);
-        Eigen::Vector3d e = laser[i - 1] - w;
-        e[2] = std::remainder(e[2], 2.0 * std::numbers::pi);
-        const Eigen::LDLT<Eigen::Matrix3d> S(match_covariance[i] + C_w);
-        if (S.info() == Eigen::Success && S.isPositive() && e.dot(S.solve(e)) <= check_options.gate) {
-          increment = w + C_w * S.solve(e);
-          covariances_[i] = C_w - C_w * S.solve(C_w);
-          covariances_[i] = 0.5 * (covariances_[i] + covariances_[i].transpose()).eval();
-          ++fused;
-          wheel_check_.source[i - 1] = scan_matching::IncrementSource::fused;
-          log_.scans[i].odometry = apply_increment(log_.scans[i - 1].odometry, increment);
-          continue;
-        }
-      }
-      if (model.used > 0 && (!gaps[i] || wheel_steps[i].size() > 1)) {
+      std::optional<scan_matching::CombinedIncrement> combined;
+      if (fuse && check.source[i - 1] == scan_matching::IncrementSource::inconsistent && !match_covariance[i].isZero())
+        combined = scan_matching::combine_increments(model.correct_along(wheel_steps[i]),
+                                                     model.covariance_along(wheel_steps[i]), laser[i - 1],
+                                                     match_covariance[i], check_options.gate);
+      if (combined) {
+        increment = combined->increment;
+        covariances_[i] = combined->covariance;
+        wheel_check_.source[i - 1] = scan_matching::IncrementSource::fused;
+      } else if (model.used > 0 && (!gaps[i] || wheel_steps[i].size() > 1)) {
         increment = model.correct_along(wheel_steps[i]);
         covariances_[i] = model.covariance_along(wheel_steps[i]);
       } else if (model.used > 0) {
@@ -313,7 +298,7 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
   using scan_matching::IncrementSource;
   const std::size_t kept = check.count(IncrementSource::matched), failed = check.count(IncrementSource::failed),
                     gap = check.count(IncrementSource::gap), inconsistent = check.count(IncrementSource::inconsistent);
-  assert(fused == check.count(IncrementSource::fused));
+  const std::size_t fused = check.count(IncrementSource::fused);
   log.info("laser odometry: ", kept + fused, " of ", n - 1, " increments scan-matched (median residual ",
            median * 1000.0, " mm, ", correlative, " after a correlative search, ", disagreed,
            " replaced by a tight match from the wheels",

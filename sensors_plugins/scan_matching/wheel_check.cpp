@@ -83,6 +83,16 @@ WheelCheckResult check_against_wheels(const std::vector<Eigen::Vector3d>& wheel,
   return r;
 }
 
+std::optional<CombinedIncrement> combine_increments(const Eigen::Vector3d& w, const Eigen::Matrix3d& C_w,
+                                                    const Eigen::Vector3d& m, const Eigen::Matrix3d& C_m, double gate) {
+  Eigen::Vector3d e = m - w;
+  e[2] = std::remainder(e[2], 2.0 * std::numbers::pi);
+  const Eigen::LDLT<Eigen::Matrix3d> S(C_m + C_w);
+  if (S.info() != Eigen::Success || !S.isPositive() || !(e.dot(S.solve(e)) <= gate)) return std::nullopt;
+  const Eigen::Matrix3d C = C_w - C_w * S.solve(C_w);
+  return CombinedIncrement{w + C_w * S.solve(e), 0.5 * (C + C.transpose())};
+}
+
 Eigen::Vector3d WheelModel::correct(const Eigen::Vector3d& wheel) const {
   return {(1.0 + scale) * wheel[0], (1.0 + scale) * wheel[1], (1.0 + turn_scale) * wheel[2] + bias_per_m * wheel[0]};
 }

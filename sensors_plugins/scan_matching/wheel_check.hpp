@@ -39,6 +39,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <optional>
 #include <vector>
 
 namespace mspace::scan_matching {
@@ -80,6 +81,20 @@ struct WheelCheckResult {
   double median_path = 0.0;  ///< L̄ (m)
   std::size_t count(IncrementSource s) const;
 };
+
+/// Two estimates of one increment combined by their covariances — the
+/// corrected wheels w with C_w and a match m with C_m (robot frame):
+///   e = m − w (θ wrapped),  S = C_m + C_w,
+///   increment w + C_w S⁻¹ e,  covariance C_w − C_w S⁻¹ C_w,
+/// so each decides where it is the stronger (a match along a corridor is weak
+/// along it, strong across). Nothing when eᵀS⁻¹e exceeds `gate`: the two
+/// disagree beyond both covariances (scan_match_fuse_wheels).
+struct CombinedIncrement {
+  Eigen::Vector3d increment;
+  Eigen::Matrix3d covariance;
+};
+std::optional<CombinedIncrement> combine_increments(const Eigen::Vector3d& w, const Eigen::Matrix3d& C_w,
+                                                    const Eigen::Vector3d& m, const Eigen::Matrix3d& C_m, double gate);
 
 /// Checks matched increments against the wheels (see the file comment).
 /// `wheel` and `matched` are robot increments, `source` says which of them

@@ -210,4 +210,29 @@ TEST(WheelModel, CovarianceOfALongIncrementIsTheComposedRandomWalk) {
   EXPECT_NEAR(Cu(2, 2) - C(2, 2), std::pow(0.01 * 0.6, 2), 1e-9);
 }
 
+// Two estimates combined by their covariances (scan_match_fuse_wheels):
+// a match weak along x (a corridor) and sure across it, wheels equally sure
+// in x and y. The result takes x from the wheels and y from the match, with
+// the covariance of the combination; a disagreement beyond both is refused.
+TEST(WheelCheck, CombinedIncrementsTakeEachWhereItIsStronger) {
+  const Eigen::Vector3d w(1.00, 0.00, 0.0), m(1.10, 0.004, 0.0);
+  const Eigen::Matrix3d C_w = Eigen::Vector3d(1e-4, 1e-4, 1e-6).asDiagonal();  // 1 cm, 1 cm
+  const Eigen::Matrix3d C_m = Eigen::Vector3d(1.0, 1e-6, 1e-6).asDiagonal();   // 1 m along, 1 mm across
+  const auto c = combine_increments(w, C_w, m, C_m, 25.9);
+  ASSERT_TRUE(c);
+  // x: (1.00/1e-4 + 1.10/1) / (1/1e-4 + 1); y: (0/1e-4 + 0.004/1e-6) / (1/1e-4 + 1/1e-6); θ: equal weights.
+  EXPECT_NEAR(c->increment[0], (1.00 / 1e-4 + 1.10) / (1e4 + 1.0), 1e-12);
+  EXPECT_NEAR(c->increment[1], (0.004 / 1e-6) / (1e4 + 1e6), 1e-12);
+  EXPECT_NEAR(c->increment[2], 0.0, 1e-15);
+  EXPECT_NEAR(c->covariance(0, 0), 1.0 / (1e4 + 1.0), 1e-15);
+  EXPECT_NEAR(c->covariance(1, 1), 1.0 / (1e4 + 1e6), 1e-15);
+  EXPECT_NEAR(c->covariance(2, 2), 0.5e-6, 1e-15);
+  // Headings a turn apart are the same heading.
+  const auto wrapped = combine_increments(w, C_w, Eigen::Vector3d(1.0, 0.0, 2.0 * std::numbers::pi), C_m, 25.9);
+  ASSERT_TRUE(wrapped);
+  EXPECT_NEAR(wrapped->increment[2], 0.0, 1e-12);
+  // 5 cm across the corridor is 5σ of the two together: beyond a gate of 16.
+  EXPECT_FALSE(combine_increments(w, C_w, Eigen::Vector3d(1.0, 0.05, 0.0), C_m, 16.0));
+}
+
 }  // namespace
