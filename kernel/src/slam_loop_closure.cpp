@@ -23,7 +23,8 @@
 // evidence, keep it waiting; an ambiguous search or a different placement
 // drops it.
 // An accepted closure declares each paired local feature a duplicate of its
-// old partner (MapFeature::merged_into: never associated again). With a
+// old partner (MapFeature::merged_into: never associated again; the old one
+// absorbs the duplicate's dense information, Feature::absorb). With a
 // re-linearising estimator the recent trajectory and local map are first
 // moved to the closure's guess — the correction spread along the path since
 // the old map was last seen — and a coincidence factor per pair is added
@@ -656,6 +657,7 @@ void Slam::close_loops(const DataStep& data) {
     MapFeature& dup = features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)];
     MapFeature& kept = features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)];
     dup.merged_into = kept.id;
+    kept.feature->absorb(*dup.feature);  // what the local copy saw beyond the old one (SDK 6)
     kept.last_seen_path = path_distance_;
   }
   associator_.map_changed();

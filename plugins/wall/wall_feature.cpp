@@ -4,6 +4,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -461,6 +462,28 @@ Eigen::MatrixXd WallFeature::share_block(int block, const Eigen::VectorXd& value
   shared[block] = true;
   set_shared(shared, any_shared() ? L_s_ : geometry(x_).L);
   return B().topRows(own_dims()) * old_Bd;
+}
+
+// A copy of this wall mapped a second time (e.g. beyond an end the first
+// pass had not seen, or by a returning robot) and merged into it: its
+// observations join this wall's dense information in the order they were
+// made, so that the ends it saw are this wall's extent and its real-end
+// sightings count towards this wall's end extensions (ICRA §IV, "Add
+// information"). The line is not touched; the ends outside the M-space slide.
+void WallFeature::absorb(const Feature& duplicate) {
+  const auto* copy = dynamic_cast<const WallFeature*>(&duplicate);
+  if (copy == nullptr || copy == this || copy->observations_.empty()) return;
+  std::deque<WallObservation> merged;
+  std::merge(observations_.begin(), observations_.end(), copy->observations_.begin(), copy->observations_.end(),
+             std::back_inserter(merged), [](const WallObservation& a, const WallObservation& b) {
+               return a.view.path_distance < b.view.path_distance;
+             });
+  observations_ = std::move(merged);
+  prune(observations_.back().view.path_distance);
+  if (mdim_ == 0)
+    follow_latest();
+  else
+    slide_ends();
 }
 
 std::optional<Extension> WallFeature::extend(const SensorView& last_view) {

@@ -153,6 +153,9 @@ class WallFeature : public Feature {
   /// points, in order) and, while tentative, "gating_covariance" (4×4).
   SavedFeature save() const override;
   std::optional<Extension> extend(const SensorView& last_view) override;
+  /// Takes a merged copy's observations (interleaved by path distance, then
+  /// pruned as usual) and slides the free ends over its extent.
+  void absorb(const Feature& duplicate) override;
   bool can_share(int block) const override;
   std::optional<JoinProposal> propose_join(int block, const Feature& other, int other_block) const override;
   Eigen::MatrixXd share_block(int block, const Eigen::VectorXd& value) override;

@@ -451,6 +451,34 @@ void check_round_trip_future(const Probe& p, Recorder& r) {
   });
 }
 
+// Feature::absorb: the kernel merges a feature mapped twice into its older
+// copy. Absorbing an exact copy of itself adds no evidence about anything
+// new, so it may change no innovation, no M-space coordinate and no
+// dimension (the estimator is not told about absorb()).
+void check_absorb_copy(const Probe& p, Recorder& r) {
+  guarded(r, "feature.absorb_copy", [&] {
+    const SavedFeature saved = p.sample.feature->save();
+    std::unique_ptr<Feature> merged = p.type.restore(saved), copy = p.type.restore(saved);
+    if (merged == nullptr || copy == nullptr) {
+      r.fail("feature.absorb_copy", "restore() returned nullptr");
+      return;
+    }
+    merged->absorb(*copy);
+    const Feature& original = *p.sample.feature;
+    if (merged->mspace_dim() != original.mspace_dim() || merged->coords().size() != original.coords().size()) {
+      r.fail("feature.absorb_copy", "absorbing an identical copy changed the M-space dimension or the layout");
+      return;
+    }
+    // Coordinates outside the M-space (e.g. a wall's free ends) may move.
+    const Eigen::VectorXd moved_in_mspace = original.B() * (merged->coords() - original.coords());
+    const Eigen::Index msize = p.inn.eta.size();
+    const Eigen::VectorXd before = eta_at(original, original.coords(), p.sample.x_ms, p.sample.measurement, msize);
+    const Eigen::VectorXd after = eta_at(*merged, merged->coords(), p.sample.x_ms, p.sample.measurement, msize);
+    r.at_most("feature.absorb_copy", std::max(max_abs(moved_in_mspace), after.allFinite() ? difference(before, after) : kNaN),
+              kSymmetryTol, "absorbing an identical copy moved the feature in its M-space or changed its innovation");
+  });
+}
+
 void check_determinism(const Probe& p, Recorder& r) {
   guarded(r, "feature.sample_deterministic", [&] {
     std::optional<FeatureSample> again = p.type.sample(p.dim, p.seed);
@@ -725,6 +753,7 @@ void check_sample(const FeatureType& type, int dim, std::uint64_t seed, Recorder
   check_symmetries(p, r);
   check_round_trip(p, r);
   check_round_trip_future(p, r);
+  check_absorb_copy(p, r);
   check_determinism(p, r);
   check_wrong_sizes(p, r);
 }

@@ -224,6 +224,42 @@ TEST(Wall, LifeCycleGrowsMspaceAndSlidesEnds) {
   EXPECT_LT(in.eta.norm(), 1e-9);
 }
 
+// A copy of the wall mapped beyond its free end (x 3–5, end seen as a real
+// corner three times) and merged into it: the wall slides its free end over
+// the copy's extent, keeps its line, measured start and M-space dimension,
+// and the copy's real-end sightings extend it to dimension 4 at the corner.
+TEST(Wall, AbsorbTakesTheCopysExtentAndRealEnds) {
+  WallType type(quick_config());
+  const std::uint32_t start_real = ls::make_flags(ls::EndReason::Depth, ls::EndReason::Fov);
+  const std::uint32_t end_real = ls::make_flags(ls::EndReason::Fov, ls::EndReason::Corner);
+  auto wall = type.create(see_wall(0.0, 0.0, 2.0, start_real), view_at(0.0, 0.0));
+  auto copy = type.create(see_wall(3.0, 3.0, 5.0, end_real), view_at(3.0, 3.0));
+  ASSERT_TRUE(wall && copy);
+  for (int k = 0; k < 3; ++k) {
+    wall->add_dense_information(see_wall(0.5 * k, 0.0, 2.0, start_real), view_at(0.5 * k, k));
+    copy->add_dense_information(see_wall(3.0 + 0.5 * k, 3.0, 5.0, end_real), view_at(3.0 + 0.5 * k, 3.0 + k));
+  }
+  ASSERT_TRUE(wall->extend(view_at(1.0, 2.0)));  // 0 → 2
+  ASSERT_TRUE(wall->extend(view_at(1.0, 2.0)));  // + the start: 3
+  ASSERT_EQ(wall->mspace_dim(), 3);
+  ASSERT_NEAR(wall->coords()[2], 2.0, 1e-12);
+
+  wall->absorb(*wall);  // itself: nothing to take
+  EXPECT_EQ(dynamic_cast<WallFeature&>(*wall).num_observations(), 3);
+  wall->absorb(*copy);
+  EXPECT_EQ(dynamic_cast<WallFeature&>(*wall).num_observations(), 6);
+  EXPECT_EQ(wall->mspace_dim(), 3);
+  EXPECT_NEAR(wall->coords()[0], 0.0, 1e-12);  // the measured start stays
+  EXPECT_NEAR(wall->coords()[1], 3.0, 1e-12);  // the line stays
+  EXPECT_NEAR(wall->coords()[3], 3.0, 1e-12);
+  EXPECT_NEAR(wall->coords()[2], 5.0, 1e-12);  // the free end slid over the copy
+  const auto ext = wall->extend(view_at(4.0, 5.0));
+  ASSERT_TRUE(ext);
+  EXPECT_EQ(ext->new_dims, 1);
+  EXPECT_EQ(wall->mspace_dim(), 4);
+  EXPECT_NEAR(wall->coords()[2], 5.0, 1e-12);
+}
+
 // Rotating the whole world (robot and wall) about the origin changes no
 // innovation: J_η,state (eq. 30) must annihilate that direction, or relative
 // measurements would create absolute heading information.

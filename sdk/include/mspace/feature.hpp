@@ -234,6 +234,16 @@ class Feature {
   /// estimator must add; std::nullopt when nothing changes.
   virtual std::optional<Extension> extend(const SensorView& last_view) = 0;
 
+  /// The kernel has declared `duplicate` — a feature of the same type — the
+  /// same object as this one (a loop closure's pair, or a copy mapped twice
+  /// and merged), after the estimator made the two coincide; `duplicate` is
+  /// never matched again. Take over the evidence it alone holds (e.g. the
+  /// extent a wall's copy saw beyond this wall's ends), so that it is neither
+  /// lost nor mapped a third time. Only coordinates outside the M-space may
+  /// change (the estimator is not told); the M-space dimension stays.
+  /// Default: nothing.
+  virtual void absorb(const Feature& /*duplicate*/) {}
+
  protected:
   Eigen::VectorXd x_;
   int mdim_ = 0;
