@@ -3,17 +3,18 @@
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 
 namespace mspace::laser_lines {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-
 }  // namespace
 
 Measurement to_measurement(const Segment& s) {
@@ -30,6 +31,11 @@ std::vector<ParamSpec> LaserLinesExtractor::param_specs() {
   const LineConfig d;
   return {
       param_double("range_sigma", d.range_sigma, "range noise std, lower bound of the fit's σ (m)", 1e-6),
+      param_bool("range_sigma_from_data", false,
+                 "cut each scan with the range noise the recent segments show (median over the last 400 "
+                 "segments of 20 or more points, each its residuals turned back along the beams) where that "
+                 "exceeds range_sigma: the breakpoint and trimming thresholds follow a noisier laser than "
+                 "configured"),
       param_double("min_range", d.min_range, "shorter ranges are ignored (m)", 0.0),
       param_double("max_range", d.max_range, "longer ranges count as no return (m)", 0.0),
       param_double("breakpoint_lambda_deg", d.breakpoint_lambda / kDeg,
@@ -73,6 +79,9 @@ LaserLinesExtractor::LaserLinesExtractor(const PluginArgs& args) {
   config_.angle_sigma_floor = p.get_double("angle_sigma_floor_deg") * kDeg;
   if (config_.min_range >= config_.max_range)
     throw std::invalid_argument("laser_lines: min_range must be below max_range");
+  sigma_from_data_ = p.get_bool("range_sigma_from_data");
+  sigma_in_use_ = config_.range_sigma;
+  log_ = args.logger;
 }
 
 void LaserLinesExtractor::extract(const SensorReading& reading, std::vector<Measurement>& out) {
@@ -83,8 +92,63 @@ void LaserLinesExtractor::extract(const SensorReading& reading, std::vector<Meas
        << (reading.values.allFinite() ? "" : " and non-finite values");
     throw std::runtime_error(os.str());
   }
-  for (const Segment& s : extract_segments(reading.values.col(0), reading.values.col(1), config_))
-    out.push_back(to_measurement(s));
+  LineConfig scan_config = config_;
+  scan_config.range_sigma = sigma_in_use_;
+  const std::vector<Segment> segments = extract_segments(reading.values.col(0), reading.values.col(1), scan_config);
+  for (const Segment& s : segments) out.push_back(to_measurement(s));
+  learn_range_noise(segments);
+}
+
+// The noise is always measured (it costs a pass over the inliers); it is
+// reported once the window is full, with a warning when the configured range_sigma contradicts
+// it by more than a factor kContradiction, and used only with
+// range_sigma_from_data.
+void LaserLinesExtractor::learn_range_noise(const std::vector<Segment>& segments) {
+  constexpr double kContradiction = 1.25;
+  noise_.add(segments, config_.max_incidence);
+  if (sigma_from_data_) sigma_in_use_ = noise_.sigma(config_.range_sigma);
+  const std::optional<double> measured = noise_.median();
+  if (reported_ || !measured || noise_.samples().size() < RangeNoiseTracker::kWindow || log_ == nullptr) return;
+  reported_ = true;
+  const double ratio = *measured / config_.range_sigma;
+  if (ratio > kContradiction || ratio < 1.0 / kContradiction)
+    log_->warn("range noise measured on the first ", noise_.samples().size(), " segments: ", *measured,
+               " m, against range_sigma ", config_.range_sigma, " m (",
+               sigma_from_data_ ? (ratio > 1.0 ? "the scans are cut with the measured value"
+                                               : "range_sigma is kept as the least the extractor assumes")
+                                : "set range_sigma, or range_sigma_from_data: true",
+               ")");
+  else
+    log_->info("range noise measured on the first ", noise_.samples().size(), " segments: ", *measured,
+               " m (range_sigma ", config_.range_sigma, " m)");
+}
+
+void LaserLinesExtractor::save_state(StateWriter& out) const {
+  const std::deque<double>& kept = noise_.samples();
+  Eigen::MatrixXd samples(static_cast<Eigen::Index>(kept.size()), 1);
+  for (std::size_t i = 0; i < kept.size(); ++i) samples(static_cast<Eigen::Index>(i), 0) = kept[i];
+  out.put("range_noise_samples", samples);
+  out.put("range_sigma_in_use", Eigen::MatrixXd::Constant(1, 1, sigma_in_use_));
+  out.put("range_noise_reported", Eigen::MatrixXd::Constant(1, 1, reported_ ? 1.0 : 0.0));
+}
+
+void LaserLinesExtractor::restore_state(const StateReader& in, int version) {
+  const std::string context = "laser_lines restore_state";
+  if (version != 1) throw std::invalid_argument(context + ": state version " + std::to_string(version) + " (reads 1)");
+  const Eigen::MatrixXd& samples = get_state(in, "range_noise_samples", -1, 1, context);
+  const double in_use = get_state(in, "range_sigma_in_use", 1, 1, context)(0, 0);
+  const double reported = get_state(in, "range_noise_reported", 1, 1, context)(0, 0);
+  if (static_cast<std::size_t>(samples.rows()) > RangeNoiseTracker::kWindow || !samples.allFinite() ||
+      (samples.array() < 0).any())
+    throw std::invalid_argument(context + ": " + std::to_string(samples.rows()) +
+                                " range noise samples, expected at most " + std::to_string(RangeNoiseTracker::kWindow) +
+                                " finite non-negative values");
+  if (!(std::isfinite(in_use) && in_use >= config_.range_sigma))
+    throw std::invalid_argument(context + ": range_sigma_in_use " + std::to_string(in_use) +
+                                " is below range_sigma (other parameters?)");
+  noise_.set_samples(std::deque<double>(samples.col(0).data(), samples.col(0).data() + samples.rows()));
+  sigma_in_use_ = in_use;
+  reported_ = reported != 0.0;
 }
 
 std::optional<SampleScene> LaserLinesExtractor::sample_scene(std::uint64_t seed) const {

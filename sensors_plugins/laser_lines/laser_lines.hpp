@@ -15,6 +15,7 @@
 #include "line_extraction.hpp"
 #include "mspace/extractor.hpp"
 #include "mspace/params.hpp"
+#include "mspace/state.hpp"
 
 namespace mspace::laser_lines {
 
@@ -26,7 +27,7 @@ class LaserLinesExtractor final : public Extractor {
  public:
   static std::vector<ParamSpec> param_specs();
   explicit LaserLinesExtractor(const PluginArgs& args);
-  explicit LaserLinesExtractor(const LineConfig& config) : config_(config) {}
+  explicit LaserLinesExtractor(const LineConfig& config) : config_(config), sigma_in_use_(config.range_sigma) {}
 
   void extract(const SensorReading& reading, std::vector<Measurement>& out) override;
 
@@ -37,8 +38,26 @@ class LaserLinesExtractor final : public Extractor {
 
   const LineConfig& config() const { return config_; }
 
+  /// The range noise σ the next scan is cut with: the configured
+  /// range_sigma, or with range_sigma_from_data the median of the recent
+  /// segments' estimates when that is larger (RangeNoiseTracker).
+  double range_sigma_in_use() const { return sigma_in_use_; }
+  const RangeNoiseTracker& range_noise() const { return noise_; }
+
+  // Run-time state (checkpoints): the recent segments' noise estimates.
+  bool has_state() const override { return true; }
+  void save_state(StateWriter& out) const override;
+  void restore_state(const StateReader& in, int version) override;
+
  private:
+  void learn_range_noise(const std::vector<Segment>& segments);
+
   LineConfig config_;
+  bool sigma_from_data_ = false;
+  double sigma_in_use_ = 0.0;
+  RangeNoiseTracker noise_;
+  Logger* log_ = nullptr;
+  bool reported_ = false;
 };
 
 }  // namespace mspace::laser_lines

@@ -360,4 +360,45 @@ std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen
   return segs;
 }
 
+std::optional<double> range_noise_of_segment(const Segment& segment, double max_incidence) {
+  constexpr int kMinPoints = 20;
+  const Vec2 u(std::cos(segment.alpha), std::sin(segment.alpha));  // the line's normal
+  const double min_cos = std::cos(max_incidence);
+  double sum = 0.0;
+  int n = 0;
+  for (Eigen::Index i = 0; i < segment.inliers.cols(); ++i) {
+    const Vec2 p = segment.inliers.col(i);
+    const double range = p.norm();
+    if (range <= 0.0) continue;
+    const double cos_incidence = std::abs(u.dot(p)) / range;  // beam direction · normal
+    if (cos_incidence < min_cos) continue;
+    const double along_beam = (u.dot(p) - segment.rho) / cos_incidence;
+    sum += along_beam * along_beam;
+    ++n;
+  }
+  if (n < kMinPoints) return std::nullopt;
+  return std::sqrt(sum / (n - 2));
+}
+
+void RangeNoiseTracker::add(const std::vector<Segment>& segments, double max_incidence) {
+  for (const Segment& s : segments)
+    if (const auto sigma = range_noise_of_segment(s, max_incidence)) {
+      samples_.push_back(*sigma);
+      if (samples_.size() > kWindow) samples_.pop_front();
+    }
+}
+
+std::optional<double> RangeNoiseTracker::median() const {
+  if (samples_.size() < kMinSamples) return std::nullopt;
+  std::vector<double> sorted(samples_.begin(), samples_.end());
+  const auto middle = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+  std::nth_element(sorted.begin(), middle, sorted.end());
+  return *middle;
+}
+
+double RangeNoiseTracker::sigma(double floor) const {
+  const std::optional<double> m = median();
+  return m && *m > floor ? *m : floor;
+}
+
 }  // namespace mspace::laser_lines

@@ -34,6 +34,8 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <deque>
+#include <optional>
 #include <numbers>
 #include <vector>
 
@@ -84,5 +86,32 @@ struct Segment {
 /// increasing); a range outside [min_range, max_range] (e.g. 0) is no return.
 std::vector<Segment> extract_segments(const Eigen::VectorXd& ranges, const Eigen::VectorXd& bearings,
                                       const LineConfig& config);
+
+/// The range noise σ that one segment's inliers show: the perpendicular
+/// residuals of its fitted line, each turned back into range along its beam
+/// (÷ cos of the beam's incidence on the line; beams beyond max_incidence are
+/// left out), σ̂² = Σ e² / (n − 2). std::nullopt with fewer than 20 such points.
+std::optional<double> range_noise_of_segment(const Segment& segment, double max_incidence);
+
+/// The range noise of a laser measured on its scans: the median of the last
+/// kWindow segments' estimates (range_noise_of_segment) — robust to segments
+/// that are not straight walls (clutter, people) — once kMinSamples are in.
+class RangeNoiseTracker {
+ public:
+  static constexpr std::size_t kWindow = 400;
+  static constexpr std::size_t kMinSamples = 20;
+
+  void add(const std::vector<Segment>& segments, double max_incidence);
+  /// The median, or std::nullopt before kMinSamples estimates.
+  std::optional<double> median() const;
+  /// The σ to cut the next scan with: the median where it exceeds `floor`
+  /// (the configured range_sigma), otherwise `floor`.
+  double sigma(double floor) const;
+  const std::deque<double>& samples() const { return samples_; }
+  void set_samples(std::deque<double> samples) { samples_ = std::move(samples); }
+
+ private:
+  std::deque<double> samples_;  ///< newest last
+};
 
 }  // namespace mspace::laser_lines

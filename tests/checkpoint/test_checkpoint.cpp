@@ -327,6 +327,19 @@ TEST(Checkpoint, IntelSmoother) {
   expect_resume_equals_uninterrupted({"intel_walls.yaml", "smoother", 300, 600, {}});
 }
 
+// laser_lines' measured range noise (range_sigma_from_data) is run-time
+// state: with range_sigma set below what Intel's scans show (≈ 1 cm), the σ
+// the scans are cut with follows the measurement, and a resumed run must
+// carry the last 400 segments' estimates over to cut the same segments.
+TEST(Checkpoint, IntelSmootherWithMeasuredRangeNoise) {
+  if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
+  expect_resume_equals_uninterrupted({"intel_walls.yaml", "smoother", 300, 600, [](RunConfig& c) {
+                                        ASSERT_EQ(c.sensors.size(), 1u);
+                                        c.sensors[0].extractor.params.set("range_sigma", 0.005);
+                                        c.sensors[0].extractor.params.set("range_sigma_from_data", true);
+                                      }});
+}
+
 TEST(Checkpoint, VictoriaParkEkf) {
   if (!have_victoria_park()) GTEST_SKIP() << "Victoria Park data not found in " << datasets() / "victoria_park";
   expect_resume_equals_uninterrupted({"victoria_park.yaml", "ekf", 2000, 4000, {}});

@@ -33,6 +33,10 @@ int main(int argc, char** argv) {
   app.add_option("--lasers", lasers, "comma-separated laser presets, or all")->delimiter(',');
   app.add_option("--stride", stride, "score every stride-th scan");
   app.add_option("--bridge", bridge, "bridge_no_returns to compare with 0");
+  bool sigma_from_data = false;
+  app.add_flag("--sigma-from-data", sigma_from_data,
+               "compare the range noise measured on the scans (range_sigma_from_data) with the configured one, "
+               "both at --bridge, instead of --bridge with 0");
   CLI11_PARSE(app, argc, argv);
 
   std::vector<std::string> presets = lasers;
@@ -43,11 +47,16 @@ int main(int argc, char** argv) {
   mspace::laser_lines::LineConfig configured = intel_walls_line_config();
   configured.bridge_no_returns = bridge;
   mspace::laser_lines::LineConfig cutting = configured;
-  cutting.bridge_no_returns = 0;
+  if (!sigma_from_data) cutting.bridge_no_returns = 0;
 
-  std::printf("laser_lines (config/intel_walls.yaml, bridge_no_returns %d | 0) on %zu plans × %zu seeds, every "
-              "%zu-th scan\n",
-              configured.bridge_no_returns, plans.size(), seeds.size(), stride);
+  if (sigma_from_data)
+    std::printf("laser_lines (config/intel_walls.yaml, bridge_no_returns %d; range noise measured | configured) on "
+                "%zu plans × %zu seeds, every %zu-th scan\n",
+                configured.bridge_no_returns, plans.size(), seeds.size(), stride);
+  else
+    std::printf("laser_lines (config/intel_walls.yaml, bridge_no_returns %d | 0) on %zu plans × %zu seeds, every "
+                "%zu-th scan\n",
+                configured.bridge_no_returns, plans.size(), seeds.size(), stride);
   std::printf("%-20s %6s %7s | %9s %9s %9s %9s | %9s %9s %9s %9s\n", "laser", "scans", "pieces", "precision",
               "recall", "end prec", "end rec", "prec (0)", "rec (0)", "e.prec(0)", "e.rec(0)");
   for (const std::string& preset : presets) {
@@ -60,7 +69,7 @@ int main(int argc, char** argv) {
         settings.route.length_m = 0.0;
         settings.laser = laser_preset(preset);
         const Simulation sim = simulate(settings);
-        with += score_lines(sim, configured, stride);
+        with += score_lines(sim, configured, stride, sigma_from_data);
         without += score_lines(sim, cutting, stride);
       }
     std::printf("%-20s %6zu %7zu | %9.3f %9.3f %9.3f %9.3f | %9.3f %9.3f %9.3f %9.3f\n", preset.c_str(), with.scans,

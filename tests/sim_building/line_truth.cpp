@@ -79,7 +79,10 @@ LineScore& LineScore::operator+=(const LineScore& o) {
   return *this;
 }
 
-LineScore score_lines(const Simulation& sim, const laser_lines::LineConfig& c, std::size_t stride) {
+LineScore score_lines(const Simulation& sim, const laser_lines::LineConfig& configured, std::size_t stride,
+                      bool sigma_from_data) {
+  laser_lines::LineConfig c = configured;
+  laser_lines::RangeNoiseTracker noise;
   const LaserSpec& l = sim.settings.laser;
   const std::vector<Segment> walls = sim.plan.static_segments();
   std::vector<WallLine> lines;
@@ -132,7 +135,9 @@ LineScore score_lines(const Simulation& sim, const laser_lines::LineConfig& c, s
     score.visible += pieces.size();
 
     // The extracted segments, placed with the true laser pose.
+    if (sigma_from_data) c.range_sigma = noise.sigma(configured.range_sigma);
     const std::vector<laser_lines::Segment> segs = laser_lines::extract_segments(ranges, bearings, c);
+    if (sigma_from_data) noise.add(segs, configured.max_incidence);
     std::vector<Placed> placed;
     const double cs = std::cos(laser[2]), sn = std::sin(laser[2]);
     const auto to_plan = [&](const Vec2& p) { return Vec2(origin.x() + cs * p.x() - sn * p.y(), origin.y() + sn * p.x() + cs * p.y()); };

@@ -55,7 +55,10 @@ struct LineScore {
 };
 
 /// Scores `config` on every `stride`-th scan of `sim`.
-LineScore score_lines(const Simulation& sim, const laser_lines::LineConfig& config, std::size_t stride = 1);
+/// With sigma_from_data each scan is cut with the range noise measured on the
+/// scored scans before it (laser_lines' range_sigma_from_data).
+LineScore score_lines(const Simulation& sim, const laser_lines::LineConfig& config, std::size_t stride = 1,
+                      bool sigma_from_data = false);
 
 /// The extractor settings of config/intel_walls.yaml (the configuration the
 /// generated buildings are run with).
