@@ -32,10 +32,10 @@ std::vector<ParamSpec> LaserLinesExtractor::param_specs() {
   return {
       param_double("range_sigma", d.range_sigma, "range noise std, lower bound of the fit's σ (m)", 1e-6),
       param_bool("range_sigma_from_data", false,
-                 "cut each scan with the range noise the recent segments show (median over the last 400 "
-                 "segments of 20 or more points, each its residuals turned back along the beams) where that "
-                 "exceeds range_sigma: the breakpoint and trimming thresholds follow a noisier laser than "
-                 "configured"),
+                 "cut each scan into clusters with the range noise the recent segments show (median over the "
+                 "last 400 segments of 20 or more points, each its residuals turned back along the beams) where "
+                 "that exceeds range_sigma: the breakpoint detector's 3σ term follows a noisier laser than "
+                 "configured (trimming and the covariance floor keep range_sigma)"),
       param_double("min_range", d.min_range, "shorter ranges are ignored (m)", 0.0),
       param_double("max_range", d.max_range, "longer ranges count as no return (m)", 0.0),
       param_double("breakpoint_lambda_deg", d.breakpoint_lambda / kDeg,
@@ -93,7 +93,7 @@ void LaserLinesExtractor::extract(const SensorReading& reading, std::vector<Meas
     throw std::runtime_error(os.str());
   }
   LineConfig scan_config = config_;
-  scan_config.range_sigma = sigma_in_use_;
+  scan_config.breakpoint_sigma = sigma_in_use_;
   const std::vector<Segment> segments = extract_segments(reading.values.col(0), reading.values.col(1), scan_config);
   for (const Segment& s : segments) out.push_back(to_measurement(s));
   learn_range_noise(segments);

@@ -38,9 +38,9 @@ class LaserLinesExtractor final : public Extractor {
 
   const LineConfig& config() const { return config_; }
 
-  /// The range noise σ the next scan is cut with: the configured
-  /// range_sigma, or with range_sigma_from_data the median of the recent
-  /// segments' estimates when that is larger (RangeNoiseTracker).
+  /// The range noise σ the next scan's breakpoints are found with: the
+  /// configured range_sigma, or with range_sigma_from_data the median of the
+  /// recent segments' estimates when that is larger (RangeNoiseTracker).
   double range_sigma_in_use() const { return sigma_in_use_; }
   const RangeNoiseTracker& range_noise() const { return noise_; }
 

@@ -88,7 +88,8 @@ std::vector<std::pair<int, int>> clusters(const ScanPoints& scan, const ScanPoin
     breaks = breaks || dphi >= c.breakpoint_lambda;
     if (!breaks) {
       const double r = std::min(dense.ranges[i], dense.ranges[i - 1]);
-      const double limit = r * std::sin(dphi) / std::sin(c.breakpoint_lambda - dphi) + 3.0 * c.range_sigma;
+      const double sigma = std::max(c.range_sigma, c.breakpoint_sigma);
+      const double limit = r * std::sin(dphi) / std::sin(c.breakpoint_lambda - dphi) + 3.0 * sigma;
       breaks = (dense.p.col(i) - dense.p.col(i - 1)).norm() > limit;
     }
     if (breaks) {

@@ -48,6 +48,10 @@ struct LineConfig {
   double min_range = 0.05;            ///< shorter ranges are no return (m)
   double max_range = 30.0;            ///< longer ranges count as no return (m)
   double breakpoint_lambda = 10.0 * std::numbers::pi / 180.0;  ///< λ of the adaptive breakpoint detector (rad)
+  /// The range noise of the breakpoint detector's 3σ term when above
+  /// range_sigma (the measured noise, laser_lines' range_sigma_from_data); 0:
+  /// range_sigma. Trimming and the covariance floor keep range_sigma.
+  double breakpoint_sigma = 0.0;
   double split_distance = 0.05;       ///< split/merge threshold (m)
   /// A run of at most this many beams without any return (range 0, negative
   /// or not finite: what the sources write for no-return and error codes)

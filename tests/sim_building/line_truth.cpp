@@ -135,7 +135,7 @@ LineScore score_lines(const Simulation& sim, const laser_lines::LineConfig& conf
     score.visible += pieces.size();
 
     // The extracted segments, placed with the true laser pose.
-    if (sigma_from_data) c.range_sigma = noise.sigma(configured.range_sigma);
+    if (sigma_from_data) c.breakpoint_sigma = noise.sigma(configured.range_sigma);
     const std::vector<laser_lines::Segment> segs = laser_lines::extract_segments(ranges, bearings, c);
     if (sigma_from_data) noise.add(segs, configured.max_incidence);
     std::vector<Placed> placed;
