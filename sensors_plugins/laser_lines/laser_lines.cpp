@@ -106,8 +106,9 @@ void LaserLinesExtractor::extract(const SensorReading& reading, std::vector<Meas
 void LaserLinesExtractor::learn_range_noise(const std::vector<Segment>& segments) {
   constexpr double kContradiction = 1.25;
   noise_.add(segments, config_.max_incidence);
-  if (sigma_from_data_) sigma_in_use_ = noise_.sigma(config_.range_sigma);
+  if (!sigma_from_data_ && reported_) return;  // nothing uses the median until the next checkpoint or report
   const std::optional<double> measured = noise_.median();
+  if (sigma_from_data_) sigma_in_use_ = measured && *measured > config_.range_sigma ? *measured : config_.range_sigma;
   if (reported_ || !measured || noise_.samples().size() < RangeNoiseTracker::kWindow || log_ == nullptr) return;
   reported_ = true;
   const double ratio = *measured / config_.range_sigma;
