@@ -15,6 +15,7 @@ namespace mspace::laser_lines {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+
 }  // namespace
 
 Measurement to_measurement(const Segment& s) {
@@ -99,14 +100,14 @@ void LaserLinesExtractor::extract(const SensorReading& reading, std::vector<Meas
   learn_range_noise(segments);
 }
 
-// The noise is always measured (it costs a pass over the inliers); it is
-// reported once the window is full, with a warning when the configured range_sigma contradicts
-// it by more than a factor kContradiction, and used only with
+// The noise is always measured (a pass over the inliers); it is reported
+// once the window is full, with a warning when the configured range_sigma
+// contradicts it by more than a factor kContradiction, and used only with
 // range_sigma_from_data.
 void LaserLinesExtractor::learn_range_noise(const std::vector<Segment>& segments) {
   constexpr double kContradiction = 1.25;
   noise_.add(segments, config_.max_incidence);
-  if (!sigma_from_data_ && reported_) return;  // nothing uses the median until the next checkpoint or report
+  if (!sigma_from_data_ && reported_) return;  // without the option the median served the report alone
   const std::optional<double> measured = noise_.median();
   if (sigma_from_data_) sigma_in_use_ = measured && *measured > config_.range_sigma ? *measured : config_.range_sigma;
   if (reported_ || !measured || noise_.samples().size() < RangeNoiseTracker::kWindow || log_ == nullptr) return;
