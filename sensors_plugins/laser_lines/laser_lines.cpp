@@ -109,7 +109,7 @@ void LaserLinesExtractor::learn_range_noise(const std::vector<Segment>& segments
   noise_.add(segments, config_.max_incidence);
   if (!sigma_from_data_ && reported_) return;  // without the option the median served the report alone
   const std::optional<double> measured = noise_.median();
-  if (sigma_from_data_) sigma_in_use_ = measured && *measured > config_.range_sigma ? *measured : config_.range_sigma;
+  if (sigma_from_data_) sigma_in_use_ = RangeNoiseTracker::sigma_above(measured, config_.range_sigma);
   if (reported_ || !measured || noise_.samples().size() < RangeNoiseTracker::kWindow || log_ == nullptr) return;
   reported_ = true;
   const double ratio = *measured / config_.range_sigma;

@@ -38,12 +38,6 @@ class LaserLinesExtractor final : public Extractor {
 
   const LineConfig& config() const { return config_; }
 
-  /// The range noise σ the next scan's breakpoints are found with: the
-  /// configured range_sigma, or with range_sigma_from_data the median of the
-  /// recent segments' estimates when that is larger (RangeNoiseTracker).
-  double range_sigma_in_use() const { return sigma_in_use_; }
-  const RangeNoiseTracker& range_noise() const { return noise_; }
-
   // Run-time state (checkpoints): the recent segments' noise estimates.
   bool has_state() const override { return true; }
   void save_state(StateWriter& out) const override;
@@ -54,6 +48,8 @@ class LaserLinesExtractor final : public Extractor {
 
   LineConfig config_;
   bool sigma_from_data_ = false;
+  /// The σ the next scan's breakpoints are found with: range_sigma, or with
+  /// range_sigma_from_data the measured median where that is larger.
   double sigma_in_use_ = 0.0;
   RangeNoiseTracker noise_;
   Logger* log_ = nullptr;

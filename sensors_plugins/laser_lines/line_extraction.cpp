@@ -397,9 +397,4 @@ std::optional<double> RangeNoiseTracker::median() const {
   return *middle;
 }
 
-double RangeNoiseTracker::sigma(double floor) const {
-  const std::optional<double> m = median();
-  return m && *m > floor ? *m : floor;
-}
-
 }  // namespace mspace::laser_lines

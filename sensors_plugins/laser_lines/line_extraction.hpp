@@ -110,7 +110,10 @@ class RangeNoiseTracker {
   std::optional<double> median() const;
   /// The σ to cut the next scan with: the median where it exceeds `floor`
   /// (the configured range_sigma), otherwise `floor`.
-  double sigma(double floor) const;
+  double sigma(double floor) const { return sigma_above(median(), floor); }
+  static double sigma_above(std::optional<double> median, double floor) {
+    return median && *median > floor ? *median : floor;
+  }
   const std::deque<double>& samples() const { return samples_; }
   void set_samples(std::deque<double> samples) { samples_ = std::move(samples); }
 
