@@ -139,10 +139,11 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
   // Loop closing (slam_loop_closure.cpp): its history and counters, and per
   // feature (id, created_path, last_seen_path, merged_into) — kernel
   // bookkeeping that map files do not need.
-  Eigen::MatrixXd loop_features(4, static_cast<Eigen::Index>(features_.size()));
+  Eigen::MatrixXd loop_features(5, static_cast<Eigen::Index>(features_.size()));
   for (std::size_t i = 0; i < features_.size(); ++i) {
     const MapFeature& mf = features_[i];
-    loop_features.col(static_cast<Eigen::Index>(i)) << mf.id, mf.created_path, mf.last_seen_path, mf.merged_into;
+    loop_features.col(static_cast<Eigen::Index>(i)) << mf.id, mf.created_path, mf.last_seen_path, mf.merged_into,
+        mf.seen_since_path;
   }
   run.put("loop_features", loop_features);
   run.put("record_path",
@@ -152,7 +153,8 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
                            static_cast<double>(s.loop_ambiguous), static_cast<double>(s.loop_merged),
                            static_cast<double>(s.loop_checked), static_cast<double>(s.loop_false),
                            s.loop_worst_disagreement, s.seconds_loops, static_cast<double>(s.loop_unconfirmed),
-                           static_cast<double>(s.loop_scan_placed), static_cast<double>(s.loop_wrong_pairs)}));
+                           static_cast<double>(s.loop_scan_placed), static_cast<double>(s.loop_wrong_pairs),
+                           last_revisit_path_}));
   const PendingClosure& pending = pending_closure_;
   run.put("loop_pending", row_of({pending.active ? 1.0 : 0.0, pending.motion.theta, pending.motion.t.x(),
                                   pending.motion.t.y(), pending.motion.pivot.x(), pending.motion.pivot.y(),
@@ -291,7 +293,10 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     if (association.cols() != 4 && association.cols() != 6)
       throw std::invalid_argument("run state: association has " + std::to_string(association.cols()) +
                                   " columns, expected 4 or 6");
-    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, 14, "run state");
+    // 15 entries; 14 in a checkpoint written before last_revisit_path_ was kept (then: the last anchor).
+    const Eigen::MatrixXd& loops = get_state(run, "loops", 1, -1, "run state");
+    if (loops.cols() != 14 && loops.cols() != 15)
+      throw fail("run state: 'loops' has " + std::to_string(loops.cols()) + " entries, 14 or 15 expected");
     const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, 10, "run state");
     const Eigen::MatrixXd& pending_ids = get_state(run, "loop_pending_ids", -1, 1, "run state");
     const Eigen::MatrixXd& scan_index = get_state(run, "loop_scans", -1, 6, "run state");
@@ -322,13 +327,18 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     for (Eigen::Index i = 0; i < pending_ids.rows(); ++i)
       pending.local_ids.push_back(static_cast<int>(integer_at(pending_ids.row(i), 0, 0, 1e9, "loop_pending_ids")));
     const Eigen::MatrixXd& record_path = get_state(run, "record_path", -1, 1, "run state");
+    // Four rows in a checkpoint written before `seen_since_path` (5th row) was kept: then the run of
+    // observations is taken to begin at the creation, which the anchor rule reads as "never revisited".
     const Eigen::MatrixXd& loop_features =
-        get_state(run, "loop_features", 4, static_cast<Eigen::Index>(features.size()), "run state");
+        get_state(run, "loop_features", -1, static_cast<Eigen::Index>(features.size()), "run state");
+    if (loop_features.rows() != 4 && loop_features.rows() != 5)
+      throw fail("run state: 'loop_features' has " + std::to_string(loop_features.rows()) + " rows, 4 or 5 expected");
     for (std::size_t i = 0; i < features.size(); ++i) {
       const auto c = static_cast<Eigen::Index>(i);
       if (loop_features(0, c) != features[i].id) throw fail("run state: 'loop_features' is not in the map's order");
       features[i].created_path = loop_features(1, c);
       features[i].last_seen_path = loop_features(2, c);
+      features[i].seen_since_path = loop_features.rows() > 4 ? loop_features(4, c) : features[i].created_path;
       features[i].merged_into = static_cast<int>(integer_at(loop_features.col(c).transpose(), 3, 0, 1e9, "merged_into"));
     }
     std::vector<StampedPose> trajectory = poses_from(run, "trajectory");
@@ -408,6 +418,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     last_loop_attempt_path_ = loops(0, 0);
     last_loop_local_signature_ = static_cast<std::int64_t>(loops(0, 1));
     last_anchor_path_ = loops(0, 2);
+    last_revisit_path_ = loops.cols() > 14 ? loops(0, 14) : last_anchor_path_;
     pending_closure_ = std::move(pending);
     scans_ = std::move(scans);
   } catch (const PersistenceError&) {

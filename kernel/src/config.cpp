@@ -40,7 +40,8 @@ const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feat
                                                    "spatial_index", "index_cell_size", "loop_closing", "loop_local_path",
                                                    "loop_min_gap_path", "loop_drift_per_metre",
                                                    "loop_drift_deg_per_metre", "loop_min_matches",
-                                                   "loop_ambiguity_ratio", "loop_scans"};
+                                                   "loop_ambiguity_ratio", "loop_scans",
+                                                   "loop_revisit_window"};
 const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir",     "trajectory",   "map",         "summary",
@@ -538,6 +539,7 @@ AssociationConfig Reader::read_association(const Item* item) const {
   if (const Item* f = find(fields, "loop_ambiguity_ratio"))
     association.loop_ambiguity_ratio = number(*f, 0.1, 1.0);
   if (const Item* f = find(fields, "loop_scans")) association.loop_scans = boolean(*f);
+  if (const Item* f = find(fields, "loop_revisit_window")) association.loop_revisit_window = boolean(*f);
   return association;
 }
 
@@ -754,6 +756,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "loop_min_matches" << YAML::Value << std::to_string(c.association.loop_min_matches);
   out << YAML::Key << "loop_ambiguity_ratio" << YAML::Value << format_number(c.association.loop_ambiguity_ratio);
   out << YAML::Key << "loop_scans" << YAML::Value << yes_no(c.association.loop_scans);
+  out << YAML::Key << "loop_revisit_window" << YAML::Value << yes_no(c.association.loop_revisit_window);
   out << YAML::EndMap;
 
   if (c.map.search_pose) {

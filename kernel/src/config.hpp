@@ -127,6 +127,12 @@ struct AssociationConfig {
   /// window; a placement the scans contradict is refused, and a unique scan
   /// placement is offered to the features as a hypothesis of its own.
   bool loop_scans = false;
+  /// The search window grows with the path since matches with *revisited*
+  /// features (seen again after loop_min_gap_path m unseen) fixed the robot,
+  /// not since any feature created that long ago did, and each old feature
+  /// may be moved onto only by the drift since it was last seen (README,
+  /// "Only a revisit widens the window").
+  bool loop_revisit_window = false;
 };
 
 /// "nearest_neighbour" or "jcbb".

@@ -23,6 +23,10 @@ struct FeatureBookkeeping {
   int times_matched = 0;
   double created_path = 0.0;    ///< path distance (Slam) when created
   double last_seen_path = 0.0;  ///< path distance of the newest evidence
+  /// Path distance where the current run of observations began: the
+  /// creation, or the last re-observation after the robot had travelled
+  /// association.loop_min_gap_path without seeing it (a revisit).
+  double seen_since_path = 0.0;
   /// Id of the older feature a loop closure found this one to duplicate
   /// (0: none). It stays in the estimator, tied to that one by a
   /// coincidence factor or the closure's update, and is no longer associated.

@@ -372,6 +372,21 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
       if ((local_fp[i].centre - old_fp[j].centre).norm() <= reach) partners[i].push_back(static_cast<int>(j));
     }
   }
+  // How far each old feature may be moved onto (MapMatchOptions::drift_per_metre). Only the accepted
+  // hypothesis is held to it: the search and the rivals are not, so that a place that repeats (a symmetric
+  // building) still makes the answer ambiguous however far the drift says the robot can be from it.
+  std::vector<double> reach_t(old.size(), std::numeric_limits<double>::infinity()), reach_r(reach_t);
+  if (options.drift_per_metre > 0.0 || options.drift_rad_per_metre > 0.0)
+    for (std::size_t j = 0; j < old.size(); ++j) {
+      if (!std::isfinite(old[j].travel_unseen)) continue;
+      const double travel = std::max(0.0, old[j].travel_unseen);
+      reach_t[j] = options.pair_base_translation + options.drift_per_metre * travel;
+      reach_r[j] = options.pair_base_rotation + options.drift_rad_per_metre * travel;
+    }
+  const auto within_reach = [&](std::size_t j, const PlanarMotion& T) {
+    return T.t.norm() <= reach_t[j] + o.cell && std::abs(T.theta) <= reach_r[j] + o.rotation_step;
+  };
+
   // Each candidate pair's motion-independent part, made when first needed.
   std::vector<std::vector<PairBasis<MaxN>>> bases(local.size());
   std::vector<std::vector<char>> based(local.size());
@@ -655,7 +670,9 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   const int needed = std::max(o.min_matches, static_cast<int>(std::ceil(o.min_fraction * static_cast<double>(local.size()))));
   auto in_window = [&](const MapMatchHypothesis& h) {
     return std::abs(h.motion.theta) <= options.max_rotation + o.rotation_step &&
-           h.motion.t.norm() <= options.max_translation + o.cell;
+           h.motion.t.norm() <= options.max_translation + o.cell &&
+           std::all_of(h.pairs.begin(), h.pairs.end(),
+                       [&](const std::pair<int, int>& p) { return within_reach(static_cast<std::size_t>(p.second), h.motion); });
   };
   // (Without dense evidence every hypothesis passes.)
   auto uncontradicted = [&](const MapMatchHypothesis& h) {
@@ -707,7 +724,9 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
                       ", at least " + std::to_string(options.dense_floor) + " needed)";
     else if (!in_window(b))
       result.reason = "the best placement (" + std::to_string(b.motion.t.norm()) + " m, " +
-                      std::to_string(b.motion.theta * 180.0 / std::numbers::pi) + " deg) lies outside the window";
+                      std::to_string(b.motion.theta * 180.0 / std::numbers::pi) +
+                      " deg) lies outside the window, or moves an old feature further than the odometry can have "
+                      "drifted since it was last seen";
     else
       result.reason = "best pairing does not fix the motion (σ " + std::to_string(b.sigma_translation) + " m, " +
                       std::to_string(b.sigma_rotation * 180.0 / std::numbers::pi) + " deg)";

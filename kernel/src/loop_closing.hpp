@@ -62,6 +62,9 @@ struct FeatureShape {
   /// travel (MapMatchOptions::pass_gap); NaN: not known (a loaded map).
   double seen_first = std::numeric_limits<double>::quiet_NaN();
   double seen_last = std::numeric_limits<double>::quiet_NaN();
+  /// At most this many metres of travel since the robot last observed it
+  /// (MapMatchOptions::drift_per_metre); NaN: not known (any reach).
+  double travel_unseen = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// A planar rigid motion about a pivot: p ↦ R(θ) (p − pivot) + pivot + t.
@@ -156,6 +159,20 @@ struct MapMatchOptions {
   /// better-fitting; features never timed join any) and pairs again within
   /// it; a local feature that fit a feature of another pass stays unpaired.
   double pass_gap = 0.0;
+  /// The drift between two sightings of one object (m and rad per metre of
+  /// travel; 0: off). The odometry cannot have moved the robot against an
+  /// old feature by more than it drifts over the travel since the robot
+  /// last observed that feature, so a pair (local, old) is used only by a
+  /// motion within pair_base_translation + drift_per_metre ×
+  /// old.travel_unseen of translation (about the pivot) and the same for
+  /// rotation: a feature tracked a few metres ago pairs only near the
+  /// estimate, one last seen a kilometre ago anywhere in the window. A
+  /// corridor whose doors repeat every 14 m cannot then lay the robot 14 m
+  /// along walls it saw 30 m ago.
+  double drift_per_metre = 0.0;
+  double drift_rad_per_metre = 0.0;
+  double pair_base_translation = 0.0;  ///< m: the robot's own uncertainty (3σ)
+  double pair_base_rotation = 0.0;     ///< rad
 };
 
 /// One verified hypothesis.

@@ -620,6 +620,7 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
       guarded(type.instance, *type.library, "add_dense_information",
               [&] { mf.feature->add_dense_information(w.measurements[match.measurement], view); });
       mf.last_seen_step = step_;
+      if (path_distance_ - mf.last_seen_path > config_.association.loop_min_gap_path) mf.seen_since_path = path_distance_;
       mf.last_seen_path = path_distance_;
       mf.last_sensor = w.sensor;
       mf.last_seen_t = w.t;
@@ -640,7 +641,7 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
         mf.feature = type.adopt(std::move(created), mf.id);
         mf.created_step = step_;
         mf.last_seen_step = step_;
-        mf.created_path = mf.last_seen_path = path_distance_;
+        mf.created_path = mf.last_seen_path = mf.seen_since_path = path_distance_;
         mf.last_sensor = w.sensor;
         mf.last_seen_t = w.t;
         guarded(type.instance, *type.library, "add_dense_information",

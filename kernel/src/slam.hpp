@@ -323,12 +323,25 @@ class Slam {
                                                                 const std::vector<FeatureShape>& local,
                                                                 const std::vector<FeatureShape>& old,
                                                                 const DataStep& data) const;
-  /// For the debug log of a refused search: how far its best placement and the estimate are from the truth.
-  std::string ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& old,
-                                   const DataStep& data) const;
+  /// The planar motion that takes the estimated frame at the record where `path` (m of travel) was reached to
+  /// the true one, G = gt ∘ est⁻¹ there; nothing without ground truth at that record.
+  std::optional<PlanarMotion> estimate_to_truth_at(double path) const;
+  /// How many of the local features are, by the ground truth, an old feature of the search's window (the same
+  /// object: residual ≤ 0.3 m in the true frame — a local feature taken there through the current pose, an old
+  /// one through the pose that last saw it), and how many could be checked: whether a failed search had
+  /// anything to find (the debug log).
+  std::optional<std::pair<int, int>> true_counterparts(const std::vector<FeatureShape>& local,
+                                                       const std::vector<FeatureShape>& old,
+                                                       const DataStep& data) const;
+  /// For the debug log of a refused search: how far its best placement and the estimate are from the truth, and
+  /// how many local features had a true counterpart to pair with.
+  std::string ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& local,
+                                   const std::vector<FeatureShape>& old, const DataStep& data) const;
   /// A number that changes when the set of features `idx` does: a search
   /// with the same local map gives the same answer (slam_loop_closure.cpp).
   std::int64_t local_map_signature(const std::vector<int>& idx) const;
+  /// The robot's median speed over the recorded steps that moved (m/s; 0 before it moved).
+  double typical_speed() const;
   /// features_[i] as map matching sees it, with its estimator covariance.
   FeatureShape estimated_shape(int i) const;
   /// The map-matching settings loop closing and the pose search share
@@ -423,6 +436,7 @@ class Slam {
   /// heading against them (note_anchor): since then its drift against the
   /// old map may have grown, at least along the directions they left free.
   double last_anchor_path_ = 0.0;
+  double last_revisit_path_ = 0.0;  ///< path of the last step a revisit fixed the robot (note_anchor)
   /// A placement map matching found and has not yet confirmed: a closure is
   /// made only when a later search, with local features this one did not
   /// pair, finds the same placement (slam_loop_closure.cpp).

@@ -83,30 +83,44 @@ std::pair<double, double> planar_sigmas(const Eigen::MatrixXd& P, const std::vec
 // with S = C_η + J_f P_f J_fᵀ (the old map's own uncertainty counts).
 // Matching two long parallel lines again fixes the heading and the offset
 // across them, not the position along them: that is no anchor, and the
-// search window keeps growing with the path.
+// search window keeps growing with the path. A revisit anchor
+// (association.loop_revisit_window) is one made by revisited features only.
 void Slam::note_anchor(const std::vector<std::pair<int, const Candidate*>>& matched) {
   const auto k = static_cast<Eigen::Index>(dofs_.size());
-  Eigen::MatrixXd info = Eigen::MatrixXd::Zero(k, k);
-  bool any = false;
+  const double gap = config_.association.loop_min_gap_path;
+  // Two sums: every old feature matched, and only the revisits among them — features seen again after
+  // loop_min_gap_path m unseen (now, or earlier in this run of observations), not ones tracked since they were
+  // created, however long ago: a wall followed for 40 m says nothing about the drift since the robot was last
+  // in that place.
+  Eigen::MatrixXd info_all = Eigen::MatrixXd::Zero(k, k), info_revisits = Eigen::MatrixXd::Zero(k, k);
+  bool any = false, any_revisit = false;
   for (const auto& [feature, candidate] : matched) {
     const MapFeature& mf = features_[static_cast<std::size_t>(feature)];
-    if (mf.feature->mspace_dim() == 0 || mf.created_path > path_distance_ - config_.association.loop_min_gap_path)
-      continue;
+    if (mf.feature->mspace_dim() == 0 || mf.created_path > path_distance_ - gap) continue;
     const Candidate& c = *candidate;
     const Eigen::MatrixXd J_f = c.J_state.rightCols(c.J_state.cols() - k);
     const Eigen::MatrixXd S = c.C_eta + J_f * checked_marginal(mf.state_idx) * J_f.transpose();
     const Eigen::LDLT<Eigen::MatrixXd> ldlt(S);
     if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) continue;
     const Eigen::MatrixXd J_r = c.J_state.leftCols(k);
-    info += J_r.transpose() * ldlt.solve(J_r);
+    const Eigen::MatrixXd info = J_r.transpose() * ldlt.solve(J_r);
+    info_all += info;
     any = true;
+    if (path_distance_ - mf.last_seen_path > gap || mf.seen_since_path > mf.created_path) {
+      info_revisits += info;
+      any_revisit = true;
+    }
   }
-  if (!any) return;
-  // A tiny ridge keeps directions nothing measured (height, tilt) finite
-  // without touching the planar ones that were measured.
-  const Eigen::MatrixXd cov = (info + 1e-9 * Eigen::MatrixXd::Identity(k, k)).ldlt().solve(Eigen::MatrixXd::Identity(k, k));
-  const auto [sigma_xy, sigma_theta] = planar_sigmas(cov, dofs_);
-  if (sigma_xy <= kMaxMotionSigmaTranslation && sigma_theta <= kMaxMotionSigmaRotation) last_anchor_path_ = path_distance_;
+  const auto fixes_the_robot = [&](const Eigen::MatrixXd& info) {
+    // A tiny ridge keeps directions nothing measured (height, tilt) finite
+    // without touching the planar ones that were measured.
+    const Eigen::MatrixXd cov =
+        (info + 1e-9 * Eigen::MatrixXd::Identity(k, k)).ldlt().solve(Eigen::MatrixXd::Identity(k, k));
+    const auto [sigma_xy, sigma_theta] = planar_sigmas(cov, dofs_);
+    return sigma_xy <= kMaxMotionSigmaTranslation && sigma_theta <= kMaxMotionSigmaRotation;
+  };
+  if (any && fixes_the_robot(info_all)) last_anchor_path_ = path_distance_;
+  if (any_revisit && fixes_the_robot(info_revisits)) last_revisit_path_ = path_distance_;
 }
 
 // A closure is right when it puts the robot where the old features say it
@@ -151,18 +165,7 @@ std::optional<std::pair<int, int>> Slam::pairs_against_ground_truth(const MapMat
                                                                     const std::vector<FeatureShape>& old,
                                                                     const DataStep& data) const {
   if (!data.ground_truth || ground_truth_.empty()) return std::nullopt;
-  // The planar motion that takes the estimated frame at the record where
-  // `path` was reached to the true one: p ↦ R(θ_gt − θ_est)(p − t_est) + t_gt.
-  const auto to_truth = [&](double path) -> std::optional<PlanarMotion> {
-    const auto then = std::lower_bound(record_path_.begin(), record_path_.end(), path);
-    if (then == record_path_.end()) return std::nullopt;
-    const StampedPose& est = trajectory_[static_cast<std::size_t>(then - record_path_.begin())];
-    const auto gt = std::lower_bound(ground_truth_.begin(), ground_truth_.end(), est.t,
-                                     [](const StampedPose& g, double t) { return g.t < t; });
-    if (gt == ground_truth_.end() || std::abs(gt->t - est.t) > 1e-6) return std::nullopt;
-    const Eigen::Vector2d t_est(est.pose[kX], est.pose[kY]), t_gt(gt->pose[kX], gt->pose[kY]);
-    return PlanarMotion{wrap_angle(gt->pose[kTheta] - est.pose[kTheta]), t_gt - t_est, t_est};
-  };
+  const auto to_truth = [&](double path) { return estimate_to_truth_at(path); };
   // A local feature is estimated together with the current pose (the same
   // filter state); an old one was last updated from the pose that last saw
   // it (or, second opinion, the one that created it), smoothed with it since.
@@ -214,17 +217,59 @@ void Slam::check_against_ground_truth(const PlanarMotion& T, const std::vector<d
   }
 }
 
-std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& old,
-                                      const DataStep& data) const {
-  if (match.best.pairs.empty()) return {};
+std::optional<PlanarMotion> Slam::estimate_to_truth_at(double path) const {
+  // p ↦ R(θ_gt − θ_est)(p − t_est) + t_gt at the record where `path` was reached.
+  const auto then = std::lower_bound(record_path_.begin(), record_path_.end(), path);
+  if (then == record_path_.end()) return std::nullopt;
+  const StampedPose& est = trajectory_[static_cast<std::size_t>(then - record_path_.begin())];
+  const auto gt = std::lower_bound(ground_truth_.begin(), ground_truth_.end(), est.t,
+                                   [](const StampedPose& g, double t) { return g.t < t; });
+  if (gt == ground_truth_.end() || std::abs(gt->t - est.t) > 1e-6) return std::nullopt;
+  const Eigen::Vector2d t_est(est.pose[kX], est.pose[kY]), t_gt(gt->pose[kX], gt->pose[kY]);
+  return PlanarMotion{wrap_angle(gt->pose[kTheta] - est.pose[kTheta]), t_gt - t_est, t_est};
+}
+
+std::optional<std::pair<int, int>> Slam::true_counterparts(const std::vector<FeatureShape>& local,
+                                                           const std::vector<FeatureShape>& old,
+                                                           const DataStep& data) const {
+  if (!data.ground_truth || ground_truth_.empty()) return std::nullopt;
+  const Pose6& truth_now = *data.ground_truth;
+  const Eigen::Vector2d here(x_r_[kX], x_r_[kY]);
+  const PlanarMotion local_to_truth{wrap_angle(truth_now[kTheta] - x_r_[kTheta]),
+                                    Eigen::Vector2d(truth_now[kX], truth_now[kY]) - here, here};
+  std::vector<std::optional<PlanarMotion>> old_to_truth;
+  for (const FeatureShape& b : old)
+    old_to_truth.push_back(estimate_to_truth_at(features_[static_cast<std::size_t>(b.feature)].last_seen_path));
+  int found = 0, checked = 0;
+  for (const FeatureShape& a : local) {
+    bool any = false, has = false;
+    for (std::size_t j = 0; j < old.size() && !has; ++j) {
+      if (!old_to_truth[j] || old[j].type != a.type) continue;
+      const auto d = distance_apart(a, local_to_truth, old[j], *old_to_truth[j]);
+      if (!d) continue;
+      any = true;
+      has = *d <= 0.3;
+    }
+    checked += any ? 1 : 0;
+    found += has ? 1 : 0;
+  }
+  if (checked == 0) return std::nullopt;
+  return std::pair{found, checked};
+}
+
+std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& local,
+                                      const std::vector<FeatureShape>& old, const DataStep& data) const {
+  std::ostringstream out;
+  out.precision(3);
+  if (const auto c = true_counterparts(local, old, data))
+    out << " (ground truth: " << c->first << " of " << c->second << " local features are old ones of the window)";
+  if (match.best.pairs.empty()) return out.str();
   std::vector<double> seen;
   for (const auto& [li, oi] : match.best.pairs)
     seen.push_back(features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)].created_path);
   const auto best = disagreement_with_ground_truth(match.best.motion, seen, data);
   const auto now = disagreement_with_ground_truth(PlanarMotion{}, seen, data);
-  if (!best || !now) return {};
-  std::ostringstream out;
-  out.precision(3);
+  if (!best || !now) return out.str();
   out << " (ground truth: the best placement is " << best->first << " m, " << best->second * 180.0 / std::numbers::pi
       << " deg off; the estimate without it " << now->first << " m, " << now->second * 180.0 / std::numbers::pi
       << " deg)";
@@ -397,6 +442,19 @@ void Slam::relate_to_old_pose(const PlanarMotion& T, const MapMatchHypothesis& h
               h.sigma_rotation * 180.0 / std::numbers::pi, " deg");
 }
 
+double Slam::typical_speed() const {
+  // The median over the recorded steps that moved (a gap's step, its net displacement over minutes, is one of many).
+  std::vector<double> speeds;
+  for (std::size_t i = 1; i < record_path_.size() && i < trajectory_.size(); ++i) {
+    const double dt = trajectory_[i].t - trajectory_[i - 1].t, moved = record_path_[i] - record_path_[i - 1];
+    if (dt > 0.0 && moved > 1e-3) speeds.push_back(moved / dt);
+  }
+  if (speeds.empty()) return 0.0;
+  const auto mid = speeds.begin() + static_cast<std::ptrdiff_t>(speeds.size() / 2);
+  std::nth_element(speeds.begin(), mid, speeds.end());
+  return *mid;
+}
+
 void Slam::close_loops(const DataStep& data) {
   const AssociationConfig& a = config_.association;
   if (path_distance_ - last_loop_attempt_path_ < 0.1 * a.loop_local_path) return;
@@ -421,11 +479,24 @@ void Slam::close_loops(const DataStep& data) {
   // last matched anything older than the local map.
   const auto [sigma_xy, sigma_theta] = planar_sigmas(checked_marginal(robot_idx_), dofs_);
   const Eigen::Vector2d here = x_r_.head<2>();
+  // Two anchors (note_anchor): any match with old features that fixed the robot, and a revisit that did. The
+  // window grows with the path since the last anchor; with association.loop_revisit_window, since the last
+  // revisit, and an old feature may then be moved onto only by the drift over the path since the last anchor
+  // of either kind plus the drift since the robot last saw that feature (MapMatchOptions::drift_per_metre) —
+  // so walls tracked for 30 m do not hold the window shut while the robot comes back to a place it left long
+  // ago, and they cannot be laid 14 m along a corridor either.
+  const double drift_rad_per_metre = a.loop_drift_deg_per_metre * std::numbers::pi / 180.0;
   const double unanchored = path_distance_ - last_anchor_path_;
+  const double widening = a.loop_revisit_window ? path_distance_ - last_revisit_path_ : unanchored;
   MapMatchOptions o = map_match_options();
-  o.max_translation = std::min(kMaxWindowTranslation, 3.0 * sigma_xy + a.loop_drift_per_metre * unanchored);
-  o.max_rotation = std::min(kMaxWindowRotation, 3.0 * sigma_theta + a.loop_drift_deg_per_metre * std::numbers::pi /
-                                                                        180.0 * unanchored);
+  o.max_translation = std::min(kMaxWindowTranslation, 3.0 * sigma_xy + a.loop_drift_per_metre * widening);
+  o.max_rotation = std::min(kMaxWindowRotation, 3.0 * sigma_theta + drift_rad_per_metre * widening);
+  if (a.loop_revisit_window) {
+    o.drift_per_metre = a.loop_drift_per_metre;
+    o.drift_rad_per_metre = drift_rad_per_metre;
+    o.pair_base_translation = 3.0 * sigma_xy + a.loop_drift_per_metre * unanchored;
+    o.pair_base_rotation = 3.0 * sigma_theta + drift_rad_per_metre * unanchored;
+  }
   const double reach = a.loop_local_path + o.max_translation;
   std::vector<int> nearby;
   for (int i : old_idx)
@@ -435,7 +506,15 @@ void Slam::close_loops(const DataStep& data) {
 
   std::vector<FeatureShape> local, old;
   for (int i : local_idx) local.push_back(estimated_shape(i));
-  for (int i : nearby) old.push_back(estimated_shape(i));
+  // The travel since each was last seen: the path, or — across a logging gap, whose odometry holds only the
+  // net displacement — the robot's typical speed times the time, whichever is longer.
+  const double speed = typical_speed();
+  for (int i : nearby) {
+    FeatureShape s = estimated_shape(i);
+    const MapFeature& mf = features_[static_cast<std::size_t>(i)];
+    s.travel_unseen = std::max(path_distance_ - mf.last_seen_path, speed * (t_ - mf.last_seen_t));
+    old.push_back(std::move(s));
+  }
   // The scans' own placement (association.loop_scans): a feature placement
   // they contradict is refused, and a placement they find unique is tried
   // as a hypothesis of its own (loop_closing.hpp, dense evidence).
@@ -513,8 +592,9 @@ void Slam::close_loops(const DataStep& data) {
                  " old features, window ", o.max_translation, " m / ", o.max_rotation * 180.0 / std::numbers::pi,
                  " deg)");
     } else if (log_->enabled(LogLevel::Debug)) {
-      log_->debug("step ", step_, ": map matching, ", local.size(), " local and ", old.size(), " old features: ",
-                  match.reason, ground_truth_verdict(match, old, data));
+      log_->debug("step ", step_, ": map matching, ", local.size(), " local and ", old.size(), " old features (window ",
+                  o.max_translation, " m, ", o.max_rotation * 180.0 / std::numbers::pi, " deg): ", match.reason,
+                  ground_truth_verdict(match, local, old, data));
     }
     return;
   }
@@ -553,7 +633,7 @@ void Slam::close_loops(const DataStep& data) {
       if (log_->enabled(LogLevel::Debug))
         log_->debug("step ", step_, ": map matching placed ", match.best.pairs.size(), " of ", local.size(),
                     " local features (", match.best.motion.t.norm(), " m, ",
-                    match.best.motion.theta * 180.0 / std::numbers::pi, " deg): waiting for the next search", ground_truth_verdict(match, old, data));
+                    match.best.motion.theta * 180.0 / std::numbers::pi, " deg): waiting for the next search", ground_truth_verdict(match, local, old, data));
       return;
     }
     pending_closure_ = PendingClosure{};

@@ -8,9 +8,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 #include <numbers>
 #include <random>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -327,6 +329,46 @@ TEST(MapMatching, PairsWithinOnePassOfTheOldMap) {
   const MapMatch later = match_local_map(local, old, drift.pivot, o);
   ASSERT_EQ(later.best.pairs.size(), 4u) << later.reason;
   for (const auto& [i, j] : later.best.pairs) EXPECT_GE(old[static_cast<std::size_t>(j)].seen_first, 400.0);
+}
+
+// MapMatchOptions::drift_per_metre: an old feature may be moved onto only
+// as far as the odometry can have drifted since the robot last saw it. The
+// local copy of the room lies 2.5 m off: 10 m of travel after the room was
+// last seen the placement is refused (0.1 + 0.05 × 10 = 0.6 m of reach),
+// 100 m after it accepted (5.1 m); refused again when three of the seven
+// were seen 5 m ago (0.35 m: the pairing as a whole is held to it), and
+// accepted when those three are not timed (a loaded map's features).
+TEST(MapMatching, AcceptsOnlyWithinTheDriftSinceTheOldFeaturesWereSeen) {
+  std::mt19937 rng(23);
+  std::vector<FeatureShape> old = room({0, 0});
+  const PlanarMotion drift{0.03, Eigen::Vector2d(2.0, -1.5), Eigen::Vector2d(3.5, 2.0)};
+  const std::vector<FeatureShape> local = moved(old, drift, 0.005, rng);
+  MapMatchOptions o;
+  o.max_translation = 6.0;
+  o.max_rotation = 0.2;
+  ASSERT_TRUE(match_local_map(local, old, drift.pivot, o).accepted);  // drift_per_metre 0: off
+  o.drift_per_metre = 0.05;
+  o.drift_rad_per_metre = 0.005;
+  o.pair_base_translation = 0.1;
+  o.pair_base_rotation = 0.01;
+  const auto seen = [&](std::initializer_list<std::size_t> which, double travel) {
+    for (std::size_t k : which) old[k].travel_unseen = travel;
+  };
+  seen({0, 1, 2, 3, 4, 5, 6}, 10.0);
+  const MapMatch soon = match_local_map(local, old, drift.pivot, o);
+  EXPECT_FALSE(soon.accepted);
+  EXPECT_NE(soon.reason.find("drifted since it was last seen"), std::string::npos) << soon.reason;
+  seen({0, 1, 2, 3, 4, 5, 6}, 100.0);
+  const MapMatch later = match_local_map(local, old, drift.pivot, o);
+  ASSERT_TRUE(later.accepted) << later.reason;
+  EXPECT_EQ(later.best.pairs.size(), 7u);
+  EXPECT_NEAR((later.best.motion.t - inverse(drift).t).norm(), 0.0, 0.05);
+  seen({1, 3, 5}, 5.0);
+  EXPECT_FALSE(match_local_map(local, old, drift.pivot, o).accepted);
+  seen({1, 3, 5}, std::nan(""));
+  const MapMatch untimed = match_local_map(local, old, drift.pivot, o);
+  ASSERT_TRUE(untimed.accepted) << untimed.reason;
+  EXPECT_EQ(untimed.best.pairs.size(), 7u);
 }
 
 TEST(MapMatching, FindsNothingWhereThereIsNothing) {
