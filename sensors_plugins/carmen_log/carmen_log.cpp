@@ -275,6 +275,11 @@ void CarmenLogSource::scan_match_odometry(const Params& params, Logger& log) {
             std::pow((std::abs(model.bias_per_m) + std::sqrt(model.parameter_covariance(2, 2))) * path, 2);
       }
     }
+    if (gaps[i] && !covariances_[i].isZero())
+      log.debug("scan ", i, " (", file_, ":", log_.scans[i].line, "): across the logging gap the wheel increment ",
+                increment.transpose(), " carries sigma ", std::sqrt(covariances_[i](0, 0)), " m, ",
+                std::sqrt(covariances_[i](1, 1)), " m, ", std::sqrt(covariances_[i](2, 2)) * 180.0 / std::numbers::pi,
+                " deg (", wheel_steps[i].size(), " wheel steps)");
     if (check.source[i - 1] == scan_matching::IncrementSource::inconsistent)
       log.debug("scan ", i, " (", file_, ":", log_.scans[i].line, "): scan match ", laser[i - 1].transpose(),
                 " contradicts the wheel odometry ", wheel[i - 1].transpose(), " (chi2 ", check.chi2[i - 1],
