@@ -137,7 +137,7 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
   for (std::size_t i = 0; i < health_.size(); ++i) health_[i].save(run, "health_" + std::to_string(i) + "_");
   covariance_health_.save(run, "covariance_health_");
   // Loop closing (slam_loop_closure.cpp): its history and counters, and per
-  // feature (id, created_path, last_seen_path, merged_into) — kernel
+  // feature (id, created_path, last_seen_path, merged_into, seen_since_path) — kernel
   // bookkeeping that map files do not need.
   Eigen::MatrixXd loop_features(5, static_cast<Eigen::Index>(features_.size()));
   for (std::size_t i = 0; i < features_.size(); ++i) {

@@ -162,17 +162,20 @@ struct MapMatchOptions {
   /// The drift between two sightings of one object (m and rad per metre of
   /// travel; 0: off). The odometry cannot have moved the robot against an
   /// old feature by more than it drifts over the travel since the robot
-  /// last observed that feature, so a pair (local, old) is used only by a
-  /// motion within pair_base_translation + drift_per_metre ×
-  /// old.travel_unseen of translation (about the pivot) and the same for
-  /// rotation: a feature tracked a few metres ago pairs only near the
-  /// estimate, one last seen a kilometre ago anywhere in the window. A
-  /// corridor whose doors repeat every 14 m cannot then lay the robot 14 m
-  /// along walls it saw 30 m ago.
+  /// last observed that feature, so a hypothesis is accepted only when its
+  /// motion is within pair_base_translation + drift_per_metre ×
+  /// old.travel_unseen of translation (about the pivot), and the same for
+  /// rotation, for every old feature it pairs: a feature tracked a few
+  /// metres ago pairs only near the estimate, one last seen a kilometre ago
+  /// anywhere in the window. A corridor whose doors repeat every 14 m cannot
+  /// then lay the robot 14 m along walls it saw 30 m ago. The search and the
+  /// rivals are not held to it (a repeated place stays ambiguous).
   double drift_per_metre = 0.0;
   double drift_rad_per_metre = 0.0;
-  double pair_base_translation = 0.0;  ///< m: the robot's own uncertainty (3σ)
-  double pair_base_rotation = 0.0;     ///< rad
+  /// What every pair may move by in any case (m, rad): the robot's own 3σ and
+  /// the drift since it was last anchored (Slam::close_loops).
+  double pair_base_translation = 0.0;
+  double pair_base_rotation = 0.0;
 };
 
 /// One verified hypothesis.
