@@ -167,8 +167,8 @@ struct MapMatchOptions {
   /// old.travel_unseen of translation (about the pivot), and the same for
   /// rotation, for every old feature it pairs: a feature tracked a few
   /// metres ago pairs only near the estimate, one last seen a kilometre ago
-  /// anywhere in the window. A corridor whose doors repeat every 14 m cannot
-  /// then lay the robot 14 m along walls it saw 30 m ago. The search and the
+  /// anywhere in the window. A structure that repeats every 14 m cannot then
+  /// lay the robot 14 m along features it saw 30 m ago. The search and the
   /// rivals are not held to it (a repeated place stays ambiguous).
   double drift_per_metre = 0.0;
   double drift_rad_per_metre = 0.0;

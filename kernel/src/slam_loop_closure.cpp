@@ -90,7 +90,7 @@ void Slam::note_anchor(const std::vector<std::pair<int, const Candidate*>>& matc
   const double gap = config_.association.loop_min_gap_path;
   // Two sums: every old feature matched, and only the revisits among them — features seen again after
   // loop_min_gap_path m unseen (now, or earlier in this run of observations), not ones tracked since they were
-  // created, however long ago: a wall followed for 40 m says nothing about the drift since the robot was last
+  // created, however long ago: a feature followed for 40 m says nothing about the drift since the robot was last
   // in that place.
   Eigen::MatrixXd info_all = Eigen::MatrixXd::Zero(k, k), info_revisits = Eigen::MatrixXd::Zero(k, k);
   bool any = false, any_revisit = false;
@@ -483,8 +483,8 @@ void Slam::close_loops(const DataStep& data) {
   // window grows with the path since the last anchor; with association.loop_revisit_window, since the last
   // revisit, and an old feature may then be moved onto only by the drift over the path since the last anchor
   // of either kind plus the drift since the robot last saw that feature (MapMatchOptions::drift_per_metre) —
-  // so walls tracked for 30 m do not hold the window shut while the robot comes back to a place it left long
-  // ago, and they cannot be laid 14 m along a corridor either.
+  // so features tracked for 30 m do not hold the window shut while the robot comes back to a place it left
+  // long ago, and a place that repeats cannot be laid onto its neighbour 14 m away either.
   const double drift_rad_per_metre = a.loop_drift_deg_per_metre * std::numbers::pi / 180.0;
   const double unanchored = path_distance_ - last_anchor_path_;
   const double widening = a.loop_revisit_window ? path_distance_ - last_revisit_path_ : unanchored;
@@ -506,13 +506,14 @@ void Slam::close_loops(const DataStep& data) {
 
   std::vector<FeatureShape> local, old;
   for (int i : local_idx) local.push_back(estimated_shape(i));
-  // The travel since each was last seen: the path, or — across a logging gap, whose odometry holds only the
-  // net displacement — the robot's typical speed times the time, whichever is longer.
-  const double speed = typical_speed();
+  // With loop_revisit_window, the travel since each was last seen: the path, or — across a logging gap whose
+  // odometry holds only the net displacement — the robot's typical speed times the time, whichever is longer.
+  const double speed = a.loop_revisit_window ? typical_speed() : 0.0;
   for (int i : nearby) {
     FeatureShape s = estimated_shape(i);
     const MapFeature& mf = features_[static_cast<std::size_t>(i)];
-    s.travel_unseen = std::max(path_distance_ - mf.last_seen_path, speed * (t_ - mf.last_seen_t));
+    if (a.loop_revisit_window)
+      s.travel_unseen = std::max(path_distance_ - mf.last_seen_path, speed * (t_ - mf.last_seen_t));
     old.push_back(std::move(s));
   }
   // The scans' own placement (association.loop_scans): a feature placement
