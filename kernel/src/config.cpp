@@ -27,7 +27,9 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr int kFirstAngle = kTheta;
 
 const std::vector<std::string> kTopKeys = {"run",         "source",       "motion", "estimator", "features", "sensors",
-                                           "association", "initial_pose", "output", "evaluation", "map"};
+                                           "association", "initial_pose", "output", "evaluation", "map",
+                                           "problem"};
+const std::vector<std::string> kProblemKeys = {"freeze_in_sensor_frame"};
 const std::vector<std::string> kEvaluationKeys = {"relations", "relations_max_dt", "ground_truth_sensor", "reference"};
 const std::vector<std::string> kRunKeys = {"name",       "log_level", "max_steps", "checkpoint_every",
                                            "health_check_every", "plugin_path", "seed", "skip_steps"};
@@ -628,6 +630,10 @@ RunConfig Reader::read_document(const YAML::Node& root) {
   config.output = read_output(find(sections, "output"), config.name);
   config.evaluation = read_evaluation(find(sections, "evaluation"), config.sensors);
   config.map = read_map(find(sections, "map"));
+  if (const Item* problem = find(sections, "problem")) {
+    const std::vector<Item> fields = entries(*problem, &kProblemKeys);
+    if (const Item* f = find(fields, "freeze_in_sensor_frame")) config.problem.freeze_in_sensor_frame = boolean(*f);
+  }
   if (search_pose) {
     config.map.search_pose = true;
     // Without a map section the map may come from the command line (--map);
@@ -714,6 +720,11 @@ void emit_run(YAML::Emitter& out, const RunConfig& c) {
     out << YAML::Key << "start" << YAML::Value << (c.map.start_at_map_end ? "map_end" : "config");
     out << YAML::Key << "working_set_rows" << YAML::Value << c.map.working_set_rows;
     out << YAML::Key << "extend_when_unmapped" << YAML::Value << c.map.extend_when_unmapped;
+    out << YAML::EndMap;
+  }
+  if (c.problem.freeze_in_sensor_frame) {
+    out << YAML::Key << "problem" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "freeze_in_sensor_frame" << YAML::Value << "true";
     out << YAML::EndMap;
   }
 }

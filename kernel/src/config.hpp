@@ -213,6 +213,16 @@ const char* map_mode_name(MapConfig::Mode mode);
 /// that uses it, …); empty when it can. The YAML reader and the CLI share it.
 std::string map_config_problem(const MapConfig& map);
 
+/// The nonlinear problem the kernel records for a re-linearising estimator
+/// (problem.hpp; the `smoother`).
+struct ProblemConfig {
+  /// A frozen observation (and an extension's prior) is linear in the frame
+  /// of the sensor (robot) at its pose node, so a rigid move of node and
+  /// feature changes nothing; false: linear in the world frame (the
+  /// frozen-factor rule, docs/writing-an-estimator.md).
+  bool freeze_in_sensor_frame = false;
+};
+
 struct RunConfig {
   std::filesystem::path file;
   std::string name;
@@ -229,6 +239,7 @@ struct RunConfig {
   /// starts part-way through a log).
   std::int64_t skip_steps = 0;
   MapConfig map;
+  ProblemConfig problem;
   InstanceConfig source, motion, estimator;
   std::vector<InstanceConfig> features;
   std::vector<SensorConfig> sensors;

@@ -8,6 +8,8 @@
 #include <string>
 #include <unordered_map>
 
+#include <Eigen/LU>
+
 #include "mspace/transform.hpp"
 #include "slam.hpp"
 
@@ -171,14 +173,139 @@ void Problem::freeze(Factor& f) {
 }
 
 void Problem::freeze_feature(int feature_id) {
-  for (auto& f : factors_)
-    if (f->live && f->feature_id == feature_id) freeze(*f);
+  const auto snapshot = snapshots_.find(feature_id);
+  for (auto& f : factors_) {
+    if (!f->live || f->feature_id != feature_id) continue;
+    if (snapshot != snapshots_.end()) freeze_in_frame(*f, snapshot->second);
+    freeze(*f);
+  }
+  if (snapshot != snapshots_.end()) snapshots_.erase(snapshot);
+}
+
+void Problem::before_extend(const MapFeature& mf) {
+  if (!c_.freeze_in_sensor_frame) return;
+  const FeatureTypeSlot& type = (*c_.types)[static_cast<std::size_t>(mf.type)];
+  snapshot(mf, guarded(type.instance, *type.library, "B", [&] { return mf.feature->B(); }));
+}
+
+void Problem::snapshot(const MapFeature& mf, const Eigen::MatrixXd& B) {
+  sync_rows();
+  snapshots_[mf.id] = {B, mf.feature->coords()};
+  // A live factor whose pose node moved since its last linearisation (a
+  // loop closure's warp) is linearised again, for freezing: that turn would
+  // otherwise be frozen into G.
+  constexpr double kMovedM = 0.01, kMovedRad = 1e-3;
+  FactorLinearization lin;
+  for (auto& f : factors_) {
+    if (!f->live || f->feature_id != mf.id || f->feature->mspace_dim() != f->dim || f->node_base.size() != 1) continue;
+    const Pose6 d = pose_difference(node_value(f->node), f->node_base.front());
+    if (d.head<3>().norm() > kMovedM || d.tail<3>().cwiseAbs().maxCoeff() > kMovedRad) evaluate_observation(*f, lin);
+  }
+}
+
+bool Problem::in_frame(int i) const { return factors_.at(static_cast<std::size_t>(i))->in_frame; }
+
+const MapFeature* Problem::map_feature(int id) const {
+  // Slam appends features with rising ids and only erases: a sorted vector.
+  const auto it = std::lower_bound(c_.features->begin(), c_.features->end(), id,
+                                   [](const MapFeature& mf, int key) { return mf.id < key; });
+  if (it != c_.features->end() && it->id == id) return &*it;
+  for (const MapFeature& mf : *c_.features)
+    if (mf.id == id) return &mf;
+  return nullptr;
+}
+
+bool Problem::freeze_in_frame(Factor& f, const Snapshot& before) {
+  const int dim = static_cast<int>(f.lin_rows.size());
+  if (f.kind != FactorKind::Observation || f.lin_nodes.size() != 1 || f.lin_nodes.front() != f.node ||
+      before.B.rows() != dim || f.J.cols() != k_ + dim)
+    return false;
+  FactorLinearization now;
+  evaluate_linear(f, now);  // η at the current values (the feature as it was before the change)
+  // η per change of x_f: J_f δx_p with δx_p = B_old δx_f (eq. 10).
+  return move_into_frame(f, now.eta, f.J.rightCols(dim) * before.B, before.x, f.node, f.sensor);
+}
+
+bool Problem::move_into_frame(Factor& f, const Eigen::VectorXd& eta, const Eigen::MatrixXd& G_f,
+                              const Eigen::VectorXd& x_f, int node, int sensor) {
+  if (x_f.size() != f.feature->layout().size() || G_f.cols() != x_f.size() || G_f.rows() != eta.size())
+    return false;
+  const Pose6 mount = sensor >= 0 ? c_.mounts[static_cast<std::size_t>(sensor)] : Pose6::Zero();
+  const Pose6 x_ms = compound(node_value(node), mount);  // eq. 17
+  Eigen::MatrixXd J_of, J_os;
+  const Eigen::VectorXd x_o = to_sensor_frame(f.feature->layout(), x_f, x_ms, &J_of, &J_os);  // eqs. 7–9
+  const Eigen::FullPivLU<Eigen::MatrixXd> lu(J_of);
+  if (J_of.rows() != J_of.cols() || !lu.isInvertible()) return false;
+  const Eigen::MatrixXd G = G_f * lu.inverse();  // δx_f = J_of⁻¹ δx_o
+  if (!G.allFinite() || !eta.allFinite()) return false;
+  f.in_frame = true;
+  f.node = node;
+  f.sensor = sensor;
+  f.eta = eta;
+  f.G = G;
+  f.x_o_base = x_o;
+  f.J = Eigen::MatrixXd(eta.size(), 0);
+  f.lin_nodes.clear();
+  f.node_base.clear();
+  f.lin_rows.clear();
+  f.row_base.resize(0);
+  return true;
+}
+
+bool Problem::evaluate_in_frame(const Factor& f, FactorLinearization& out) const {
+  const MapFeature* mf = map_feature(f.feature_id);
+  if (mf == nullptr)
+    throw std::logic_error("problem: a frozen observation of feature " + std::to_string(f.feature_id) +
+                           ", which is no longer in the map");
+  const FeatureTypeSlot& type = (*c_.types)[static_cast<std::size_t>(mf->type)];
+  Mat6 J_sr;
+  const Pose6 mount = f.sensor >= 0 ? c_.mounts[static_cast<std::size_t>(f.sensor)] : Pose6::Zero();
+  const Pose6 x_ms = compound(node_value(f.node), mount, &J_sr);  // eq. 17
+  Eigen::MatrixXd J_of, J_os;
+  const Eigen::VectorXd x_o = to_sensor_frame(mf->feature->layout(), mf->feature->coords(), x_ms, &J_of, &J_os);
+  const Eigen::MatrixXd Bd = guarded(type.instance, *type.library, "B_dual", [&] { return mf->feature->B_dual(); });
+  out.kind = f.kind;
+  out.robust = f.robust;
+  out.eta = f.eta + f.G * (x_o - f.x_o_base);
+  out.J.resize(f.G.rows(), k_ + Bd.cols());
+  out.J.leftCols(k_) = f.G * J_os * select_columns(J_sr, c_.dofs);  // as eq. 30, with G for J_ηo
+  out.J.rightCols(Bd.cols()) = f.G * J_of * Bd;
+  out.C = f.C;
+  out.idx.clear();
+  for (int j = 0; j < k_; ++j) out.idx.push_back(pose_node_index(f.node) + j);
+  out.idx.insert(out.idx.end(), mf->state_idx.begin(), mf->state_idx.end());
+  return true;
 }
 
 void Problem::extended(const MapFeature& mf, const StateAugmentation& aug, int first) {
   sync_rows();
   freeze_feature(mf.id);
   added(aug, first);
+  // The extension's prior is relative too (the new coordinates as seen from
+  // the robot): kept in the robot's frame, over the rows the feature will
+  // have (its own rows, the new ones, then shared groups: Slam::extend).
+  if (!c_.freeze_in_sensor_frame) return;
+  Factor& f = *factors_.back();
+  if (f.lin_nodes.size() != 1) return;  // a prior without the robot (a loaded map's) stays as it is
+  std::vector<int> new_idx(mf.own_idx.begin(), mf.own_idx.end());
+  for (Eigen::Index i = 0; i < aug.C_new.rows(); ++i) new_idx.push_back(first + static_cast<int>(i));
+  new_idx.insert(new_idx.end(), mf.state_idx.begin() + static_cast<std::ptrdiff_t>(mf.own_idx.size()),
+                 mf.state_idx.end());
+  const FeatureTypeSlot& type = (*c_.types)[static_cast<std::size_t>(mf.type)];
+  const Eigen::MatrixXd B = guarded(type.instance, *type.library, "B", [&] { return mf.feature->B(); });
+  if (B.rows() != static_cast<Eigen::Index>(new_idx.size())) return;
+  Eigen::MatrixXd G_f = Eigen::MatrixXd::Zero(f.J.rows(), B.cols());  // Σ over rows of J_row B_row (eq. 10)
+  for (std::size_t j = 0; j < f.lin_rows.size(); ++j) {
+    const auto pos = std::find(new_idx.begin(), new_idx.end(), f.lin_rows[j]) - new_idx.begin();
+    if (pos == static_cast<std::ptrdiff_t>(new_idx.size())) return;
+    G_f += f.J.col(k_ + static_cast<Eigen::Index>(j)) * B.row(pos);
+  }
+  f.feature_id = mf.id;
+  f.feature = mf.feature;
+  if (!move_into_frame(f, f.eta, G_f, mf.feature->coords(), f.lin_nodes.front(), -1)) {
+    f.feature_id = 0;
+    f.feature.reset();
+  }
 }
 
 void Problem::added(const StateAugmentation& aug, int first) {
@@ -230,6 +357,10 @@ void Problem::before_join(const MapFeature& a, const MapFeature& b) {
   old_idx_b_ = b.state_idx;
   x_a_ = a.feature->coords();
   x_b_ = b.feature->coords();
+  if (c_.freeze_in_sensor_frame) {
+    snapshot(a, B_a_);
+    snapshot(b, B_b_);
+  }
 }
 
 // Folds the perturbations since the factor's linearisation into eta, so that
@@ -475,6 +606,7 @@ bool Problem::linearize(int i, FactorLinearization& out) {
   // M-space since the factor was recorded no longer re-linearises it.
   if (f.live && f.feature->mspace_dim() != f.dim) freeze(f);
   if (f.live && evaluate_observation(f, out)) return true;
+  if (f.in_frame) return evaluate_in_frame(f, out);
   // Frozen, or rejected at the current values: the last linearisation.
   evaluate_linear(f, out);
   if (f.kind == FactorKind::Observation) out.kind = FactorKind::Observation;

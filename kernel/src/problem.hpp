@@ -27,12 +27,24 @@
 // dense information) already holds that evidence, and the innovation may even
 // have other rows at the higher dimension (e.g. end-point rows once a
 // segment's ends enter its M-space).
+//
+// With Context::freeze_in_sensor_frame (problem.freeze_in_sensor_frame) the
+// frozen factor is linear in the feature's coordinates *seen from its
+// sensor*: r = η + G (x_o − x_o,frozen), x_o the feature in the sensor frame
+// of its pose node now (eqs. 7–9), G = J_f B_old J_of⁻¹ — what it measured of
+// the old M-space (eq. 10). What it measures is relative, so moving node and
+// feature rigidly together changes nothing, whereas the world-frame form sees
+// a rigid turn through its second-order error (θ²/2 × the range) and resists
+// it. The extension's prior is kept the same way in the robot's frame. A
+// factor without a snapshot of its feature from before the change
+// (before_extend, before_join) or without the robot keeps the world form.
 #pragma once
 
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <optional>
+#include <unordered_map>
 #include <vector>
 
 #include <Eigen/Core>
@@ -95,6 +107,8 @@ class Problem final : public NonlinearProblem {
     Estimator* estimator = nullptr;
     const LoadedPlugin* estimator_lib = nullptr;
     std::string estimator_instance;
+    /// problem.freeze_in_sensor_frame (config.hpp): the frozen-factor rule's frame.
+    bool freeze_in_sensor_frame = false;
   };
 
   explicit Problem(Context context);
@@ -128,7 +142,10 @@ class Problem final : public NonlinearProblem {
   /// factor. A loaded map enters this way (extend): the old session's poses
   /// are marginalised, its map is a Gaussian prior with the map's joint covariance.
   void added(const StateAugmentation& aug, int first);
-  /// Before share_block: keeps B(x_f) of both features.
+  /// Before the feature's extend(): keeps its B(x_f) and x_f, with which its
+  /// live factors are frozen in their sensor's frame (the frozen-factor rule).
+  void before_extend(const MapFeature& mf);
+  /// Before share_block: keeps B(x_f) (and x_f) of both features.
   void before_join(const MapFeature& a, const MapFeature& b);
   /// After the join's rows were added (a, b with their new state_idx) and
   /// before the rows `obsolete` are removed: freezes both features' live
@@ -196,6 +213,8 @@ class Problem final : public NonlinearProblem {
 
   /// Counters for tests and the log.
   int frozen_factors() const { return frozen_; }
+  /// Factor i is linear in its pose node's frame (the frozen-factor rule).
+  bool in_frame(int i) const;
   int live_observation_factors() const;
   /// The frozen-factor rule holds: every live observation factor's feature
   /// has the M-space dimension and estimator rows it had when recorded.
@@ -208,6 +227,23 @@ class Problem final : public NonlinearProblem {
   void sync_rows();
   void freeze_feature(int feature_id);
   void freeze(Factor& f);
+  /// A feature before a change of its M-space (before_extend, before_join).
+  struct Snapshot {
+    Eigen::MatrixXd B;
+    Eigen::VectorXd x;
+  };
+  /// A live observation factor's linearisation, at the current values, moved
+  /// into its sensor's frame (the frozen-factor rule); false (nothing
+  /// changed) when it cannot be.
+  bool freeze_in_frame(Factor& f, const Snapshot& before);
+  /// Keeps B and x_f of `mf` and re-linearises its live factors (before_extend, before_join).
+  void snapshot(const MapFeature& mf, const Eigen::MatrixXd& B);
+  /// Makes f the in-frame factor r = η + G_f J_of⁻¹ (x_o − x_o(x_f)) of
+  /// `f.feature` seen from `sensor` (−1: the robot) at pose node `node`.
+  bool move_into_frame(Factor& f, const Eigen::VectorXd& eta, const Eigen::MatrixXd& G_f, const Eigen::VectorXd& x_f,
+                       int node, int sensor);
+  bool evaluate_in_frame(const Factor& f, FactorLinearization& out) const;
+  const MapFeature* map_feature(int id) const;
   void rebase(Factor& f);
   void store_linearisation(Factor& f, const FactorLinearization& lin);
   bool evaluate_observation(Factor& f, FactorLinearization& out);
@@ -228,6 +264,7 @@ class Problem final : public NonlinearProblem {
   std::vector<std::unique_ptr<Factor>> factors_;
   int frozen_ = 0;
   int loop_closures_ = 0;
+  std::unordered_map<int, Snapshot> snapshots_;  ///< by feature id, until the change is recorded
   // before_join()
   int join_a_ = 0, join_b_ = 0;
   Eigen::MatrixXd B_a_, B_b_;

@@ -46,6 +46,13 @@ struct Problem::Factor {
   std::vector<Pose6> node_base;
   std::vector<int> lin_rows;
   Eigen::VectorXd row_base;
+  // A frozen observation kept in its sensor's frame (Problem::freeze_in_frame):
+  // r = eta + G (x_o − x_o_base), x_o the feature's coordinates seen from the
+  // sensor at its pose node now, G = J_f B_old J_of⁻¹ from the freezing. Its
+  // lin_nodes and lin_rows are empty: it reads the node and the feature's rows.
+  bool in_frame = false;
+  Eigen::VectorXd x_o_base;
+  Eigen::MatrixXd G;
 };
 
 }  // namespace mspace::kernel

@@ -101,6 +101,7 @@ class FlatReader {
     finite(v, field);
     return v;
   }
+  bool done() const { return at_ >= m_.size(); }
   void finish() const {
     if (at_ != m_.size()) fail("has " + std::to_string(m_.size() - at_) + " numbers left over");
   }
@@ -163,7 +164,7 @@ void Problem::save_state(StateWriter& out) const {
     w.vec(f.m.v);
     w.mat(f.m.C_v);
     w.num(f.m.flags);
-    w.num(f.sensor);
+    w.num(std::max(f.sensor, 0));  // an in-frame factor's own (−1: the robot) is in frame_factors
     w.num(f.node);
     w.ints(f.rows);
     w.num(f.dim);
@@ -188,6 +189,19 @@ void Problem::save_state(StateWriter& out) const {
   }
   out.put("factors", w.column());
   out.put_bytes("measurement_kinds", pack_strings(kinds));
+  // Linear factors kept in a sensor's frame (the frozen-factor rule,
+  // problem.hpp): their frame and linearisation point. A checkpoint written
+  // before they existed has no such key: every factor is then as saved.
+  FlatWriter frame;
+  for (std::size_t i = 0; i < factors_.size(); ++i) {
+    const Factor& f = *factors_[i];
+    if (!f.in_frame) continue;
+    frame.num(static_cast<double>(i));
+    frame.num(f.sensor);
+    frame.vec(f.x_o_base);
+    frame.mat(f.G);
+  }
+  out.put("frame_factors", frame.column());
 }
 
 void Problem::restore_state(const StateReader& in, const std::vector<MapFeature>& features) {
@@ -301,6 +315,25 @@ void Problem::restore_state(const StateReader& in, const std::vector<MapFeature>
     factors.push_back(std::move(f));
   }
   r.finish();
+  if (in.has("frame_factors")) {
+    FlatReader fr(in.get("frame_factors"), "frame_factors");
+    while (!fr.done()) {
+      const auto i = static_cast<std::size_t>(fr.integer(0, static_cast<double>(n_factors) - 1, "factor"));
+      Factor& f = *factors[i];
+      f.in_frame = true;
+      f.sensor = static_cast<int>(fr.integer(-1, std::max(0.0, n_sensors - 1), "sensor"));
+      f.x_o_base = fr.vec("x_o_base");
+      f.G = fr.mat("G");
+      const auto it = by_id.find(f.feature_id);
+      if (f.live || it == by_id.end())
+        fr.fail("factor " + std::to_string(i) + ": a frozen factor of feature " + std::to_string(f.feature_id) +
+                ", which is not in the map");
+      if (f.G.rows() != f.eta.size() || f.G.cols() != f.x_o_base.size() ||
+          f.x_o_base.size() != it->second->feature->layout().size() || !f.lin_rows.empty() || !f.lin_nodes.empty())
+        fr.fail("factor " + std::to_string(i) + ": its frame linearisation has inconsistent sizes");
+      f.feature = it->second->feature;
+    }
+  }
 
   // Everything read and checked: take it.
   nodes_ = std::move(nodes);

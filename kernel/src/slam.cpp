@@ -169,6 +169,7 @@ Slam::Slam(const RunConfig& config, PluginRegistry& registry)
     Problem::Context pc{&features_, &types_, &x_r_, dofs_, {}, motion_.get(), motion_lib_.get(),
                         config_.motion.instance, estimator_.get(), estimator_lib_.get(), config_.estimator.instance};
     for (const SensorSlot& s : sensors_) pc.mounts.push_back(s.config.mount);
+    pc.freeze_in_sensor_frame = config_.problem.freeze_in_sensor_frame;
     problem_ = std::make_unique<Problem>(std::move(pc));
     problem_->start(P0);
   }
@@ -671,6 +672,7 @@ void Slam::extend(const std::vector<int>& touched) {
     // Touched features were observed in this step, so the current pose of
     // the sensor that saw them last is the view of their newest evidence.
     const SensorView view = sensor_view(mf.last_sensor, mf.last_seen_t);
+    if (problem_ && old_dim > 0) problem_->before_extend(mf);
     ext = guarded(type.instance, *type.library, "extend", [&] { return mf.feature->extend(view); });
     if (!ext) continue;
     const std::string who = type.instance + " (plugin '" + type.plugin + "')";

@@ -327,6 +327,14 @@ TEST(Checkpoint, IntelSmoother) {
   expect_resume_equals_uninterrupted({"intel_walls.yaml", "smoother", 300, 600, {}});
 }
 
+// problem.freeze_in_sensor_frame: frozen factors kept in their sensor's
+// frame (x_o at freezing and G, checkpointed in frame_factors).
+TEST(Checkpoint, IntelSmootherFrozenInSensorFrame) {
+  if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
+  expect_resume_equals_uninterrupted(
+      {"intel_walls.yaml", "smoother", 300, 600, [](RunConfig& c) { c.problem.freeze_in_sensor_frame = true; }});
+}
+
 // laser_lines' measured range noise (range_sigma_from_data) is run-time
 // state: with range_sigma set below what Intel's scans show (≈ 1 cm), the σ
 // the scans are cut with follows the measurement, and a resumed run must
@@ -458,7 +466,7 @@ TEST(Checkpoint, InterruptedRunCheckpointsWhereItStopped) {
 // ---------------------------------------------------------------- refusals
 
 /// A checkpoint of sim_points at step 100 (ekf unless told); returns its map.bin.
-fs::path small_checkpoint(const fs::path& dir, const std::string& estimator = "ekf") {
+fs::path small_checkpoint(const fs::path& dir, const std::string& estimator = "ekf", bool in_sensor_frame = false) {
   set_log_level(LogLevel::Warn);
   PluginRegistry registry;
   registry.add_search_dir(MSPACE_PLUGIN_DIR);
@@ -468,6 +476,7 @@ fs::path small_checkpoint(const fs::path& dir, const std::string& estimator = "e
   config.output.picture = false;
   config.max_steps = 100;
   config.checkpoint_every = 100;
+  config.problem.freeze_in_sensor_frame = in_sensor_frame;
   Slam slam(config, registry);
   run_to_end(slam, quiet());
   return dir / "checkpoint" / "map.bin";
@@ -606,7 +615,7 @@ TEST(Checkpoint, PluginStateMismatchNamesThePlugin) {
 // re-linearises, and must fit the run; each refusal names the file.
 TEST(Checkpoint, NonlinearProblemMissingOrDamagedIsRefused) {
   const fs::path dir = scratch("problem");
-  const fs::path file = small_checkpoint(dir / "run", "smoother");
+  const fs::path file = small_checkpoint(dir / "run", "smoother", true);
   StoredMap map = read_map_file(file, "checkpoint");
   ASSERT_TRUE(map.checkpoint && map.checkpoint->problem);
   EXPECT_EQ(map.format_version, 3u);
@@ -663,6 +672,13 @@ TEST(Checkpoint, NonlinearProblemMissingOrDamagedIsRefused) {
     const std::string e = with_array("factors", [](Eigen::MatrixXd& f) { f.conservativeResize(f.rows() - 1, 1); });
     EXPECT_NE(e.find(edited.string()), std::string::npos) << e;
     EXPECT_NE(e.find("nonlinear problem: 'factors'"), std::string::npos) << e;  // a count that no longer fits
+  }
+  {  // the frames of the frozen factors (problem.freeze_in_sensor_frame) cut short
+    const std::string e = with_array("frame_factors", [](Eigen::MatrixXd& f) {
+      ASSERT_GT(f.rows(), 1) << "the checkpoint should hold factors kept in a frame";
+      f.conservativeResize(f.rows() - 1, 1);
+    });
+    EXPECT_NE(e.find("nonlinear problem: 'frame_factors'"), std::string::npos) << e;
   }
   {
     const std::string e = with_array("dims", [](Eigen::MatrixXd& d) { d(0, 0) = 2; });

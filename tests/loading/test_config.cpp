@@ -142,13 +142,13 @@ TEST(Config, EmptyOrNonMapDocumentIsAnError) {
   EXPECT_EQ(config_error(""), "test.yaml:1:1: the configuration is empty");
   EXPECT_EQ(config_error("- a\n- b\n"),
             "test.yaml:1:1: the configuration must be a map of sections (run, source, motion, estimator, "
-            "features, sensors, association, initial_pose, output, evaluation, map)");
+            "features, sensors, association, initial_pose, output, evaluation, map, problem)");
 }
 
 TEST(Config, UnknownKeysListTheAllowedOnes) {
   EXPECT_EQ(config_error(kBase + "outputs:\n  dir: x\n"),
             "test.yaml:21:1: outputs: unknown key (allowed: run, source, motion, estimator, features, sensors, "
-            "association, initial_pose, output, evaluation, map)");
+            "association, initial_pose, output, evaluation, map, problem)");
   EXPECT_EQ(config_error(edited("    mount:", "    mounts:")),
             "test.yaml:16:5: sensors.laser.mounts: unknown key (allowed: channel, mount, extractor, feeds, max_range, silent_readings)");
   EXPECT_EQ(config_error(edited("  name: t1\n", "  name: t1\n  speed: 3\n")),
