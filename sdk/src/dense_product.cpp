@@ -9,12 +9,24 @@
 // the function with the intrinsics carries the target attribute: whatever it
 // calls that is not inlined is compiled for the baseline processor, so no AVX
 // instruction can reach code that runs without the check.
+//
+// A large product is split by column panels of C over the helper threads of
+// Helpers below (see "Threads" in dense_product.hpp): the panels are packed
+// once by the caller, and each thread runs the same block loop over its own
+// contiguous range of column panels. A block of C is the same sum in the same
+// order whichever thread computes it, so the split changes no bit.
 #include "mspace/dense_product.hpp"
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <condition_variable>
+#include <cstdint>
+#include <cstdlib>
+#include <functional>
+#include <mutex>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
@@ -27,6 +39,89 @@ namespace mspace {
 namespace {
 
 using Eigen::Index;
+
+constexpr int kMaxThreads = 64;
+/// Products with fewer multiply–adds than this run on the calling thread:
+/// waking a helper and waiting for it costs tens of microseconds.
+constexpr double kThreadedWork = 2.0e6;
+
+int default_threads() {
+  if (const char* env = std::getenv("MSPACE_THREADS")) {
+    char* end = nullptr;
+    const long n = std::strtol(env, &end, 10);
+    if (end != env && *end == '\0' && n >= 1 && n <= kMaxThreads) return static_cast<int>(n);
+  }
+  const unsigned hw = std::thread::hardware_concurrency();
+  return hw == 0 ? 1 : static_cast<int>(std::min(hw, 4u));
+}
+
+int& threads_setting() {
+  static int threads = default_threads();
+  return threads;
+}
+
+/// Helper threads, started when first needed and kept waiting between jobs.
+/// run(parts, job) calls job(0) on the caller and job(1) … job(parts − 1) on
+/// helpers, and returns when all have returned. One job at a time: a caller
+/// that finds another job running (two filters on two threads) runs all parts
+/// itself, with the same results.
+class Helpers {
+ public:
+  static Helpers& instance() {
+    static Helpers* helpers = new Helpers;  // never destroyed: its threads wait until the process ends
+    return *helpers;
+  }
+
+  void run(int parts, const std::function<void(int)>& job) {
+    std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
+    if (!busy.owns_lock() || parts <= 1) {
+      for (int p = 0; p < parts; ++p) job(p);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      while (static_cast<int>(threads_.size()) < parts - 1) {
+        const int part = static_cast<int>(threads_.size()) + 1;
+        threads_.emplace_back([this, part, seen = generation_] { serve(part, seen); });
+        threads_.back().detach();
+      }
+      job_ = &job;
+      parts_ = parts;
+      pending_ = parts - 1;
+      ++generation_;
+    }
+    start_.notify_all();
+    job(0);
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [this] { return pending_ == 0; });
+    job_ = nullptr;
+  }
+
+ private:
+  /// Helper `part` (≥ 1): runs its part of every job after generation `seen`.
+  void serve(int part, std::uint64_t seen) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    for (;;) {
+      start_.wait(lock, [&] { return generation_ != seen; });
+      seen = generation_;
+      if (part >= parts_) continue;  // a job of fewer parts
+      const std::function<void(int)>* job = job_;
+      lock.unlock();
+      (*job)(part);
+      lock.lock();
+      if (--pending_ == 0) done_.notify_one();
+    }
+  }
+
+  std::mutex busy_;   ///< held by the caller of run() for the whole job
+  std::mutex mutex_;  ///< guards what follows
+  std::condition_variable start_, done_;
+  std::vector<std::thread> threads_;  ///< detached; kept for their count
+  const std::function<void(int)>* job_ = nullptr;
+  std::uint64_t generation_ = 0;
+  int parts_ = 0;
+  int pending_ = 0;  ///< helpers of the current job not yet done
+};
 
 #ifdef MSPACE_DENSE_PRODUCT_AVX2
 constexpr Index kRows = 8;  // rows of C per block (two 4-wide registers)
@@ -90,20 +185,48 @@ void add_product_avx2(Eigen::Ref<Eigen::MatrixXd> C, double alpha, const Eigen::
   for (Index p = 0; p < row_panels; ++p) pack_panel(A, p * kRows, kRows, packed_a.data() + p * kRows * k);
   for (Index q = 0; q < col_panels; ++q) pack_panel(B, q * kCols, kCols, packed_b.data() + q * kCols * k);
 
-  double block[kRows * kCols];
-  for (Index q = 0; q < col_panels; ++q) {
-    const Index j0 = q * kCols, block_cols = std::min(kCols, cols - j0);
-    for (Index p = lower ? j0 / kRows : 0; p < row_panels; ++p) {
-      const Index i0 = p * kRows, block_rows = std::min(kRows, rows - i0);
-      block_product_avx2(packed_a.data() + p * kRows * k, packed_b.data() + q * kCols * k, k, block);
-      for (Index c = 0; c < block_cols; ++c) {
-        const Index j = j0 + c;
-        double* column = C.data() + j * C.outerStride() + i0;
-        const double* sums = block + c * kRows;
-        for (Index r = lower ? std::max<Index>(0, j - i0) : 0; r < block_rows; ++r) column[r] += alpha * sums[r];
+  const double* a_panels = packed_a.data();
+  const double* b_panels = packed_b.data();
+  // Column panels [q_begin, q_end) of C: every block of them, whole.
+  const auto panels = [&](Index q_begin, Index q_end) {
+    double block[kRows * kCols];
+    for (Index q = q_begin; q < q_end; ++q) {
+      const Index j0 = q * kCols, block_cols = std::min(kCols, cols - j0);
+      for (Index p = lower ? j0 / kRows : 0; p < row_panels; ++p) {
+        const Index i0 = p * kRows, block_rows = std::min(kRows, rows - i0);
+        block_product_avx2(a_panels + p * kRows * k, b_panels + q * kCols * k, k, block);
+        for (Index c = 0; c < block_cols; ++c) {
+          const Index j = j0 + c;
+          double* column = C.data() + j * C.outerStride() + i0;
+          const double* sums = block + c * kRows;
+          for (Index r = lower ? std::max<Index>(0, j - i0) : 0; r < block_rows; ++r) column[r] += alpha * sums[r];
+        }
       }
     }
+  };
+
+  const double work = static_cast<double>(rows) * static_cast<double>(cols) * static_cast<double>(k) * (lower ? 0.5 : 1.0);
+  const int parts = static_cast<int>(std::min<Index>(product_threads(), col_panels));
+  if (parts <= 1 || work < kThreadedWork) {
+    panels(0, col_panels);
+    return;
   }
+  // Contiguous ranges of column panels with about equal numbers of blocks
+  // (on the lower triangle a panel further right has fewer blocks).
+  const auto blocks_in = [&](Index q) { return row_panels - (lower ? (q * kCols) / kRows : 0); };
+  Index total = 0;
+  for (Index q = 0; q < col_panels; ++q) total += blocks_in(q);
+  std::vector<Index> first(static_cast<std::size_t>(parts) + 1, col_panels);
+  first[0] = 0;
+  Index q = 0, done = 0;
+  for (int part = 1; part < parts; ++part) {
+    const Index target = total * part / parts;
+    while (q < col_panels && done + blocks_in(q) <= target) done += blocks_in(q++);
+    first[static_cast<std::size_t>(part)] = q;
+  }
+  Helpers::instance().run(parts, [&](int part) {
+    panels(first[static_cast<std::size_t>(part)], first[static_cast<std::size_t>(part) + 1]);
+  });
 }
 #endif
 
@@ -124,6 +247,10 @@ bool avx2_fma_available() {
   static const bool available = cpu_has_avx2_fma();
   return available;
 }
+
+int product_threads() { return threads_setting(); }
+
+void set_product_threads(int threads) { threads_setting() = std::clamp(threads, 1, kMaxThreads); }
 
 void add_product(Eigen::Ref<Eigen::MatrixXd> C, double alpha, const Eigen::Ref<const Eigen::MatrixXd>& A,
                  const Eigen::Ref<const Eigen::MatrixXd>& B, ProductPart part, ProductKernel kernel) {

@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <cstring>
 #include <random>
 #include <stdexcept>
+#include <thread>
 #include <vector>
 
 #include "mspace/dense_product.hpp"
@@ -77,6 +79,86 @@ INSTANTIATE_TEST_SUITE_P(Sizes, DenseProduct,
                          ::testing::Values(Sizes{1, 1, 1}, Sizes{8, 8, 4}, Sizes{7, 7, 3}, Sizes{13, 13, 17},
                                            Sizes{33, 33, 90}, Sizes{101, 101, 6}, Sizes{5, 19, 9},
                                            Sizes{21, 4, 1}, Sizes{64, 96, 33}));
+
+/// Restores product_threads() when a test ends.
+class ThreadSetting {
+ public:
+  ThreadSetting() : saved_(mspace::product_threads()) {}
+  ~ThreadSetting() { mspace::set_product_threads(saved_); }
+  ThreadSetting(const ThreadSetting&) = delete;
+  ThreadSetting& operator=(const ThreadSetting&) = delete;
+
+ private:
+  int saved_;
+};
+
+bool same_bits(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  return a.rows() == b.rows() && a.cols() == b.cols() &&
+         std::memcmp(a.data(), b.data(), static_cast<std::size_t>(a.size()) * sizeof(double)) == 0;
+}
+
+// Large products are split by columns over helper threads: every entry must
+// come out the same bit for bit with 1, 2, 3 and 4 threads, in full and on
+// the lower triangle, on sizes that are not multiples of the blocks and on a
+// block of a larger matrix (the shapes of a global update of the cekf:
+// P⁰_BB − Gᵀ Ψ G with n ≈ 1300, k ≈ 90, and Φ G).
+TEST(DenseProductThreads, ResultsAreTheSameBitForBitWhateverTheThreadCount) {
+  if (!mspace::avx2_fma_available()) GTEST_SKIP() << "no AVX2/FMA: large products run on one thread";
+  ThreadSetting restore;
+  std::mt19937 rng(11);
+  struct Case {
+    Eigen::Index m, n, k;
+    ProductPart part;
+  };
+  for (const Case c : {Case{1301, 1301, 91, ProductPart::lower}, Case{517, 517, 64, ProductPart::lower},
+                       Case{96, 1301, 93, ProductPart::full}, Case{1301, 90, 90, ProductPart::full}}) {
+    SCOPED_TRACE(::testing::Message() << c.m << " x " << c.n << ", k " << c.k);
+    const Eigen::MatrixXd A = random_matrix(c.m, c.k, rng), B = random_matrix(c.n, c.k, rng);
+    const Eigen::MatrixXd start = random_matrix(c.m + 2, c.n + 1, rng);
+    mspace::set_product_threads(1);
+    Eigen::MatrixXd one = start;
+    add_product(one.block(1, 1, c.m, c.n), -1.0, A, B, c.part);
+    for (int threads : {2, 3, 4}) {
+      mspace::set_product_threads(threads);
+      ASSERT_EQ(mspace::product_threads(), threads);
+      Eigen::MatrixXd many = start;
+      add_product(many.block(1, 1, c.m, c.n), -1.0, A, B, c.part);
+      EXPECT_TRUE(same_bits(one, many)) << threads << " threads: max difference " << (one - many).cwiseAbs().maxCoeff();
+    }
+  }
+}
+
+// Two callers at once (two filters on two threads): the second runs its
+// product on its own thread; both results are exact.
+TEST(DenseProductThreads, ConcurrentCallersGetTheSameResults) {
+  if (!mspace::avx2_fma_available()) GTEST_SKIP() << "no AVX2/FMA: large products run on one thread";
+  ThreadSetting restore;
+  std::mt19937 rng(12);
+  const Eigen::MatrixXd A = random_matrix(700, 80, rng), B = random_matrix(700, 80, rng);
+  mspace::set_product_threads(1);
+  Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(700, 700);
+  add_product(expected, 1.0, A, B, ProductPart::lower);
+  mspace::set_product_threads(2);
+  std::vector<Eigen::MatrixXd> results(4, Eigen::MatrixXd::Zero(700, 700));
+  std::vector<std::thread> callers;
+  for (std::size_t i = 0; i < results.size(); ++i)
+    callers.emplace_back([&, i] {
+      for (int repeat = 0; repeat < 5; ++repeat) {
+        results[i].setZero();
+        add_product(results[i], 1.0, A, B, ProductPart::lower);
+      }
+    });
+  for (std::thread& t : callers) t.join();
+  for (const Eigen::MatrixXd& r : results) EXPECT_TRUE(same_bits(expected, r));
+}
+
+TEST(DenseProductThreads, TheSettingIsClamped) {
+  ThreadSetting restore;
+  mspace::set_product_threads(0);
+  EXPECT_EQ(mspace::product_threads(), 1);
+  mspace::set_product_threads(1000);
+  EXPECT_EQ(mspace::product_threads(), 64);
+}
 
 TEST(DenseProductInput, NoColumnsChangeNothingAndMismatchedSizesAreErrors) {
   std::mt19937 rng(7);
