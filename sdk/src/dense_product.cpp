@@ -131,11 +131,22 @@ constexpr Index kCols = 4;  // columns of C per block
 /// of M, zero past its last row: out[l * width + r] = M(first + r, l).
 void pack_panel(const Eigen::Ref<const Eigen::MatrixXd>& M, Index first, Index width, double* out) {
   const Index valid = std::min(width, M.rows() - first);
+  if (valid == width) {
+    for (Index l = 0; l < M.cols(); ++l) {
+      const double* column = M.data() + l * M.outerStride() + first;
+      double* group = out + l * width;
+      for (Index r = 0; r < width; ++r) group[r] = column[r];
+    }
+    return;
+  }
+  // The last, partial panel: one select per entry rather than a copy and a
+  // fill, which the compiler turns into a memset call per column (a call of
+  // a few bytes for each of the k columns of every product: 2 % of the
+  // Victoria Park run's instructions).
   for (Index l = 0; l < M.cols(); ++l) {
     const double* column = M.data() + l * M.outerStride() + first;
     double* group = out + l * width;
-    for (Index r = 0; r < valid; ++r) group[r] = column[r];
-    for (Index r = valid; r < width; ++r) group[r] = 0.0;
+    for (Index r = 0; r < width; ++r) group[r] = r < valid ? column[r] : 0.0;
   }
 }
 
