@@ -194,7 +194,8 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
   // eq. 31 (before Φ changes: δx_B uses the Φ of the prior).
   const Eigen::VectorXd dx_active = -W * whitened;
   const Eigen::VectorXd basis_step = V * whitened;
-  const Eigen::VectorXd dx_slots = -(g_.topLeftCorner(n0_, ns_).transpose() * basis_step);
+  Eigen::VectorXd dx_slots(ns_);  // −Gᵀ (V w): one dot product of n0 numbers per slot, at every update
+  transposed_product(dx_slots, -1.0, g_.topLeftCorner(n0_, ns_), basis_step);
   for (int i = 0; i < n_; ++i) {
     const auto u = static_cast<std::size_t>(i);
     dx[i] = active_[u] >= 0 ? dx_active[active_[u]] : dx_slots[slot_[u]];

@@ -239,6 +239,50 @@ void add_product_avx2(Eigen::Ref<Eigen::MatrixXd> C, double alpha, const Eigen::
     panels(first[static_cast<std::size_t>(part)], first[static_cast<std::size_t>(part) + 1]);
   });
 }
+
+/// y[j] = α A(:, j) · x for the columns of A: four columns at a time, each
+/// with a 4-wide partial sum over rows [0, 4⌊m/4⌋), then the rest of the rows.
+__attribute__((target("avx2,fma"))) void transposed_product_avx2(double* y, double alpha, const double* A,
+                                                                  Index stride, Index m, Index n, const double* x) {
+  const Index m4 = m - m % 4;
+  // α (the four partial sums, then the rows past m4).
+  const auto total = [&](const double* partial, const double* column) {
+    double s = (partial[0] + partial[1]) + (partial[2] + partial[3]);
+    for (Index i = m4; i < m; ++i) s += column[i] * x[i];
+    return alpha * s;
+  };
+  alignas(32) double p0[4], p1[4], p2[4], p3[4];
+  Index j = 0;
+  for (; j + 4 <= n; j += 4) {
+    const double* c0 = A + j * stride;
+    const double* c1 = c0 + stride;
+    const double* c2 = c1 + stride;
+    const double* c3 = c2 + stride;
+    __m256d s0 = _mm256_setzero_pd(), s1 = _mm256_setzero_pd(), s2 = _mm256_setzero_pd(), s3 = _mm256_setzero_pd();
+    for (Index i = 0; i < m4; i += 4) {
+      const __m256d xi = _mm256_loadu_pd(x + i);
+      s0 = _mm256_fmadd_pd(_mm256_loadu_pd(c0 + i), xi, s0);
+      s1 = _mm256_fmadd_pd(_mm256_loadu_pd(c1 + i), xi, s1);
+      s2 = _mm256_fmadd_pd(_mm256_loadu_pd(c2 + i), xi, s2);
+      s3 = _mm256_fmadd_pd(_mm256_loadu_pd(c3 + i), xi, s3);
+    }
+    _mm256_store_pd(p0, s0);
+    _mm256_store_pd(p1, s1);
+    _mm256_store_pd(p2, s2);
+    _mm256_store_pd(p3, s3);
+    y[j] = total(p0, c0);
+    y[j + 1] = total(p1, c1);
+    y[j + 2] = total(p2, c2);
+    y[j + 3] = total(p3, c3);
+  }
+  for (; j < n; ++j) {
+    const double* c = A + j * stride;
+    __m256d s0 = _mm256_setzero_pd();
+    for (Index i = 0; i < m4; i += 4) s0 = _mm256_fmadd_pd(_mm256_loadu_pd(c + i), _mm256_loadu_pd(x + i), s0);
+    _mm256_store_pd(p0, s0);
+    y[j] = total(p0, c);
+  }
+}
 #endif
 
 bool cpu_has_avx2_fma() {
@@ -286,6 +330,27 @@ void add_product(Eigen::Ref<Eigen::MatrixXd> C, double alpha, const Eigen::Ref<c
   } else {
     C.noalias() += alpha * A * B.transpose();
   }
+}
+
+void transposed_product(Eigen::Ref<Eigen::VectorXd> y, double alpha, const Eigen::Ref<const Eigen::MatrixXd>& A,
+                        const Eigen::Ref<const Eigen::VectorXd>& x, ProductKernel kernel) {
+  if (y.size() != A.cols() || x.size() != A.rows()) {
+    throw std::invalid_argument("transposed_product: y has " + std::to_string(y.size()) + " entries, A is " +
+                                size_text(A.rows(), A.cols()) + ", x has " + std::to_string(x.size()) +
+                                " (expected y n, A m x n, x m)");
+  }
+  if (kernel == ProductKernel::avx2_fma && !avx2_fma_available()) {
+    throw std::invalid_argument("transposed_product: the AVX2/FMA kernel is not available on this processor");
+  }
+  if (y.size() == 0) return;
+#ifdef MSPACE_DENSE_PRODUCT_AVX2
+  if (kernel != ProductKernel::eigen && avx2_fma_available()) {
+    // (Both vectors have unit stride: Eigen::Ref's default for vectors.)
+    transposed_product_avx2(y.data(), alpha, A.data(), A.outerStride(), A.rows(), A.cols(), x.data());
+    return;
+  }
+#endif
+  y.noalias() = alpha * (A.transpose() * x);
 }
 
 }  // namespace mspace

@@ -80,6 +80,33 @@ INSTANTIATE_TEST_SUITE_P(Sizes, DenseProduct,
                                            Sizes{33, 33, 90}, Sizes{101, 101, 6}, Sizes{5, 19, 9},
                                            Sizes{21, 4, 1}, Sizes{64, 96, 33}));
 
+// y = α Aᵀ x (transposed_product): every kernel against plain sums, on
+// row counts that are and are not multiples of 4, column counts that are and
+// are not multiples of 4, and a block of a larger matrix.
+TEST(DenseTransposedProduct, AgreesWithTheSumsOnABlockOfALargerMatrix) {
+  std::mt19937 rng(5);
+  for (const Sizes s : {Sizes{1, 1, 0}, Sizes{3, 5, 0}, Sizes{4, 4, 0}, Sizes{96, 1301, 0}, Sizes{97, 13, 0},
+                        Sizes{8, 0, 0}, Sizes{0, 6, 0}}) {
+    const Eigen::MatrixXd store = random_matrix(s.m + 3, s.n + 2, rng);
+    const Eigen::VectorXd x = random_matrix(s.m, 1, rng);
+    for (const ProductKernel kernel : kernels()) {
+      SCOPED_TRACE(::testing::Message() << s.m << " x " << s.n << ", kernel " << static_cast<int>(kernel));
+      Eigen::VectorXd y = Eigen::VectorXd::Constant(s.n, 7.0);
+      mspace::transposed_product(y, -0.5, store.block(2, 1, s.m, s.n), x, kernel);
+      for (Eigen::Index j = 0; j < s.n; ++j) {
+        double expected = 0.0;
+        for (Eigen::Index i = 0; i < s.m; ++i) expected += store(2 + i, 1 + j) * x[i];
+        ASSERT_NEAR(y[j], -0.5 * expected, 1e-13 * (1.0 + static_cast<double>(s.m))) << "entry " << j;
+      }
+    }
+  }
+  Eigen::VectorXd y(3);
+  EXPECT_THROW(mspace::transposed_product(y, 1.0, Eigen::MatrixXd::Zero(2, 4), Eigen::VectorXd::Zero(2)),
+               std::invalid_argument);
+  EXPECT_THROW(mspace::transposed_product(y, 1.0, Eigen::MatrixXd::Zero(2, 3), Eigen::VectorXd::Zero(3)),
+               std::invalid_argument);
+}
+
 /// Restores product_threads() when a test ends.
 class ThreadSetting {
  public:

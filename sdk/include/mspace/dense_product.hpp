@@ -38,6 +38,15 @@ enum class ProductPart {
 /// Whether this build and this processor can run ProductKernel::avx2_fma.
 bool avx2_fma_available();
 
+/// y[j] = α Σ_i A[i, j] x[i] for every column j of A (y ← α Aᵀ x, y of size
+/// A.cols(), x of size A.rows()): one dot product per column, the shape of
+/// the compressed EKF's δx_B = −Gᵀ (V w) over every passive slot. Same
+/// kernels as add_product (the AVX2/FMA one: four columns at a time, 4-wide
+/// partial sums); on one thread. Throws std::invalid_argument on mismatched
+/// sizes or an unavailable kernel.
+void transposed_product(Eigen::Ref<Eigen::VectorXd> y, double alpha, const Eigen::Ref<const Eigen::MatrixXd>& A,
+                        const Eigen::Ref<const Eigen::VectorXd>& x, ProductKernel kernel = ProductKernel::automatic);
+
 /// Most threads the AVX2/FMA kernel uses for one large product, the caller
 /// included. Default: the environment variable MSPACE_THREADS when it is a
 /// number from 1 to 64, else the processor's hardware threads, at most 4.
