@@ -283,7 +283,7 @@ Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std:
     // every feature in range at every reading, so it allocates nothing but its
     // result: the per-row bookkeeping lives in buffers kept between calls, the
     // active rows' Φ is copied once (its rows are a column of the storage apart),
-    // and each P_aj = Φ_a G_j is one dot product with G's column of slot j read
+    // and the P_aj = Φ_a G_j are dot products with G's column of slot j read
     // in place; P⁰_JJ and G_Jᵀ Ψ G_J come from the memo.
     const std::vector<int>& idx = rows;
     const auto n = static_cast<Index>(idx.size());
@@ -312,6 +312,19 @@ Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std:
       double* to = phi_active.data() + passive_index[static_cast<std::size_t>(i)] * n0_;
       for (Index b = 0; b < n0_; ++b) to[b] = phi_(a, b);
     }
+    // P_aj = Φ_a G_j for every active row a and passive slot j: per slot, the
+    // dot products of its column of G (read in place) with the copied Φ_a
+    // (an n0 × active_rows matrix): one transposed_product per passive row.
+    thread_local std::vector<double> phi_g;  // [passive place * active_rows + active place]
+    const auto passive_rows = static_cast<Index>(passive_slots.size());
+    phi_g.resize(static_cast<std::size_t>(passive_rows * active_rows));
+    if (active_rows > 0) {
+      const Eigen::Map<const Eigen::MatrixXd> phi_a(phi_active.data(), n0_, active_rows);
+      for (Index p = 0; p < passive_rows; ++p) {
+        transposed_product(Eigen::Map<Eigen::VectorXd>(phi_g.data() + p * active_rows, active_rows), 1.0, phi_a,
+                           g_.col(passive_slots[static_cast<std::size_t>(p)]).head(n0_));
+      }
+    }
     const MemoEntry* memo = nullptr;
     if (const auto found = memo_.find(passive_slots); found != memo_.end()) {
       found->second.asked = true;
@@ -330,11 +343,10 @@ Eigen::MatrixXd CekfFilter::mixed_block(const std::vector<int>& rows, const std:
           value = paa(a, b);
         } else if (a < 0 && b < 0) {
           value = memo->p0_block(pi, pj) - memo->quadratic(pi, pj);
-        } else {  // one active row (its Φ), one passive (its column of G)
+        } else {  // one active row, one passive: Φ_a G_j from above
           const Index active_place = a >= 0 ? pi : pj;
-          const int slot = passive_slots[static_cast<std::size_t>(a >= 0 ? pj : pi)];
-          value = Eigen::Map<const Eigen::VectorXd>(phi_active.data() + active_place * n0_, n0_)
-                      .dot(g_.col(slot).head(n0_));
+          const Index passive_place = a >= 0 ? pj : pi;
+          value = phi_g[static_cast<std::size_t>(passive_place * active_rows + active_place)];
         }
         out(i, j) = value;
         out(j, i) = value;
