@@ -184,11 +184,12 @@ Eigen::VectorXd CekfFilter::apply_update(const std::vector<LinearizedObservation
   }
   Eigen::MatrixXd V = Eigen::MatrixXd::Zero(n0_, s.J.rows());  // (H Φ)ᵀ = Φ_Iᵀ Jᵀ
   add_product(V, 1.0, phi_rows_transposed(pos), s.J);
-  // Before the first global update there is no passive basis (n0 = 0) and V
-  // is empty: Eigen's triangular solve would still read its first
-  // coefficient (UndefinedBehaviorSanitizer: a reference bound to null).
-  if (W.size() > 0) llt.matrixU().solveInPlace<Eigen::OnTheRight>(W);
-  if (V.size() > 0) llt.matrixU().solveInPlace<Eigen::OnTheRight>(V);
+  // W ← W L⁻ᵀ and V ← V L⁻ᵀ (L⁻ᵀ = U⁻¹ with U = Lᵀ, the factor's upper
+  // triangle). Before the first global update there is no passive basis
+  // (n0 = 0) and V is empty: solve_upper_on_right then does nothing.
+  const Eigen::MatrixXd U = llt.matrixU();
+  solve_upper_on_right(W, U);
+  solve_upper_on_right(V, U);
   const Eigen::VectorXd whitened = llt.matrixL().solve(s.eta);
 
   // eq. 31 (before Φ changes: δx_B uses the Φ of the prior).

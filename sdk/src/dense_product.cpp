@@ -283,6 +283,27 @@ __attribute__((target("avx2,fma"))) void transposed_product_avx2(double* y, doub
     y[j] = total(p0, c);
   }
 }
+
+/// X ← X U⁻¹ column by column (see solve_upper_on_right), rows four at a time.
+__attribute__((target("avx2,fma"))) void solve_upper_on_right_avx2(double* X, Index x_stride, Index n, Index m,
+                                                                    const double* U, Index u_stride) {
+  const Index n4 = n - n % 4;
+  for (Index j = 0; j < m; ++j) {
+    double* xj = X + j * x_stride;
+    for (Index i = 0; i < j; ++i) {
+      const double u = U[i + j * u_stride];
+      const double* xi = X + i * x_stride;
+      const __m256d uv = _mm256_set1_pd(u);
+      for (Index r = 0; r < n4; r += 4)
+        _mm256_storeu_pd(xj + r, _mm256_fnmadd_pd(uv, _mm256_loadu_pd(xi + r), _mm256_loadu_pd(xj + r)));
+      for (Index r = n4; r < n; ++r) xj[r] -= u * xi[r];
+    }
+    const double d = U[j + j * u_stride];
+    const __m256d dv = _mm256_set1_pd(d);
+    for (Index r = 0; r < n4; r += 4) _mm256_storeu_pd(xj + r, _mm256_div_pd(_mm256_loadu_pd(xj + r), dv));
+    for (Index r = n4; r < n; ++r) xj[r] /= d;
+  }
+}
 #endif
 
 bool cpu_has_avx2_fma() {
@@ -351,6 +372,25 @@ void transposed_product(Eigen::Ref<Eigen::VectorXd> y, double alpha, const Eigen
   }
 #endif
   y.noalias() = alpha * (A.transpose() * x);
+}
+
+void solve_upper_on_right(Eigen::Ref<Eigen::MatrixXd> X, const Eigen::Ref<const Eigen::MatrixXd>& U,
+                          ProductKernel kernel) {
+  if (U.rows() != U.cols() || X.cols() != U.rows()) {
+    throw std::invalid_argument("solve_upper_on_right: X is " + size_text(X.rows(), X.cols()) + ", U " +
+                                size_text(U.rows(), U.cols()) + " (expected X n x m, U m x m)");
+  }
+  if (kernel == ProductKernel::avx2_fma && !avx2_fma_available()) {
+    throw std::invalid_argument("solve_upper_on_right: the AVX2/FMA kernel is not available on this processor");
+  }
+  if (X.size() == 0) return;
+#ifdef MSPACE_DENSE_PRODUCT_AVX2
+  if (kernel != ProductKernel::eigen && avx2_fma_available()) {
+    solve_upper_on_right_avx2(X.data(), X.outerStride(), X.rows(), X.cols(), U.data(), U.outerStride());
+    return;
+  }
+#endif
+  U.triangularView<Eigen::Upper>().solveInPlace<Eigen::OnTheRight>(X);
 }
 
 }  // namespace mspace

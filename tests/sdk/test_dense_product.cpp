@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <stdexcept>
@@ -105,6 +106,37 @@ TEST(DenseTransposedProduct, AgreesWithTheSumsOnABlockOfALargerMatrix) {
                std::invalid_argument);
   EXPECT_THROW(mspace::transposed_product(y, 1.0, Eigen::MatrixXd::Zero(2, 3), Eigen::VectorXd::Zero(3)),
                std::invalid_argument);
+}
+
+// X ← X U⁻¹ (solve_upper_on_right): every kernel against Eigen's solve, on
+// row counts that are and are not multiples of 4, on a block of a larger X,
+// with U's lower triangle full of values that must not be read.
+TEST(DenseUpperSolve, AgreesWithEigensSolveOnABlockOfALargerMatrix) {
+  std::mt19937 rng(9);
+  for (const Sizes s : {Sizes{1, 1, 0}, Sizes{5, 3, 0}, Sizes{96, 20, 0}, Sizes{97, 7, 0}, Sizes{0, 4, 0},
+                        Sizes{9, 0, 0}}) {
+    Eigen::MatrixXd U = random_matrix(s.n, s.n, rng);
+    for (Eigen::Index j = 0; j < s.n; ++j) U(j, j) = 2.0 + std::abs(U(j, j));  // well conditioned
+    const Eigen::MatrixXd start = random_matrix(s.m + 2, s.n + 1, rng);
+    Eigen::MatrixXd expected = start.block(1, 1, s.m, s.n);
+    if (s.n > 0) U.triangularView<Eigen::Upper>().solveInPlace<Eigen::OnTheRight>(expected);
+    for (const ProductKernel kernel : kernels()) {
+      SCOPED_TRACE(::testing::Message() << s.m << " x " << s.n << ", kernel " << static_cast<int>(kernel));
+      Eigen::MatrixXd X = start;
+      mspace::solve_upper_on_right(X.block(1, 1, s.m, s.n), U, kernel);
+      for (Eigen::Index j = 0; j < X.cols(); ++j)
+        for (Eigen::Index i = 0; i < X.rows(); ++i) {
+          const bool inside = i >= 1 && i <= s.m && j >= 1 && j <= s.n;
+          if (!inside) {
+            ASSERT_EQ(X(i, j), start(i, j)) << "entry (" << i << ", " << j << ") must stay";
+          } else {
+            ASSERT_NEAR(X(i, j), expected(i - 1, j - 1), 1e-12 * (1.0 + std::abs(expected(i - 1, j - 1))));
+          }
+        }
+    }
+  }
+  Eigen::MatrixXd X(3, 2);
+  EXPECT_THROW(mspace::solve_upper_on_right(X, Eigen::MatrixXd::Identity(3, 3)), std::invalid_argument);
 }
 
 /// Restores product_threads() when a test ends.

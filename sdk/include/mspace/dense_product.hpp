@@ -47,6 +47,15 @@ bool avx2_fma_available();
 void transposed_product(Eigen::Ref<Eigen::VectorXd> y, double alpha, const Eigen::Ref<const Eigen::MatrixXd>& A,
                         const Eigen::Ref<const Eigen::VectorXd>& x, ProductKernel kernel = ProductKernel::automatic);
 
+/// X ← X U⁻¹ for an upper triangular U (m × m, only its upper triangle and
+/// diagonal are read; X n × m): column j of the result is (x_j − Σ_{i<j}
+/// U(i, j) x_i) / U(j, j), the Kalman update's W L⁻ᵀ with U = Lᵀ. The AVX2/FMA
+/// kernel runs down the rows four at a time; Eigen's triangular solve
+/// otherwise. Throws std::invalid_argument on mismatched sizes or an
+/// unavailable kernel.
+void solve_upper_on_right(Eigen::Ref<Eigen::MatrixXd> X, const Eigen::Ref<const Eigen::MatrixXd>& U,
+                          ProductKernel kernel = ProductKernel::automatic);
+
 /// Most threads the AVX2/FMA kernel uses for one large product, the caller
 /// included. Default: the environment variable MSPACE_THREADS when it is a
 /// number from 1 to 64, else the processor's hardware threads, at most 4.
