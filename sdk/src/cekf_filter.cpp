@@ -552,13 +552,13 @@ void CekfFilter::refresh_memo(const Eigen::MatrixXd& V) {
   std::erase_if(memo_, [](const auto& entry) { return !entry.second.asked; });
   std::vector<int> all_slots;
   for (const auto& [slots, entry] : memo_) all_slots.insert(all_slots.end(), slots.begin(), slots.end());
-  // Vᵀ G_J for all of them at once (one blocked product of copied columns:
-  // the indexed view made Eigen evaluate it coefficient by coefficient).
+  // Vᵀ G_J for all of them, column by column: Vᵀ g for each slot's column g
+  // of G read in place (m dot products of n0 numbers against V's columns,
+  // which stay in the cache), with no copy of the columns and no packing.
   const auto cols = static_cast<Index>(all_slots.size());
-  Eigen::MatrixXd gt(cols, n0_);  // G_Jᵀ
-  for (Index c = 0; c < cols; ++c) gt.row(c) = g_.col(all_slots[static_cast<std::size_t>(c)]).head(n0_).transpose();
-  Eigen::MatrixXd VtG = Eigen::MatrixXd::Zero(V.cols(), cols);
-  add_product(VtG, 1.0, V.transpose(), gt);
+  Eigen::MatrixXd VtG(V.cols(), cols);
+  for (Index c = 0; c < cols; ++c)
+    transposed_product(VtG.col(c), 1.0, V, g_.col(all_slots[static_cast<std::size_t>(c)]).head(n0_));
   Index column = 0;
   for (auto& [slots, entry] : memo_) {
     const auto size = static_cast<Index>(slots.size());
