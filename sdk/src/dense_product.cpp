@@ -29,6 +29,11 @@
 #include <thread>
 #include <vector>
 
+#if defined(__unix__)
+#include <pthread.h>
+#define MSPACE_DENSE_PRODUCT_FORK_SAFE 1
+#endif
+
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <immintrin.h>
 #define MSPACE_DENSE_PRODUCT_AVX2 1
@@ -67,10 +72,7 @@ int& threads_setting() {
 /// itself, with the same results.
 class Helpers {
  public:
-  static Helpers& instance() {
-    static Helpers* helpers = new Helpers;  // never destroyed: its threads wait until the process ends
-    return *helpers;
-  }
+  static Helpers& instance() { return *current(); }
 
   void run(int parts, const std::function<void(int)>& job) {
     std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
@@ -111,6 +113,19 @@ class Helpers {
       lock.lock();
       if (--pending_ == 0) done_.notify_one();
     }
+  }
+
+  /// The process's helpers, never destroyed (their threads wait until the
+  /// process ends). A child made by fork() has none of its parent's threads
+  /// and may have copied a mutex while it was held: it starts afresh.
+  static Helpers*& current() {
+    static Helpers* helpers = [] {
+#ifdef MSPACE_DENSE_PRODUCT_FORK_SAFE
+      pthread_atfork(nullptr, nullptr, [] { current() = new Helpers; });
+#endif
+      return new Helpers;
+    }();
+    return helpers;
   }
 
   std::mutex busy_;   ///< held by the caller of run() for the whole job

@@ -12,6 +12,9 @@
 #include <thread>
 #include <vector>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include "mspace/dense_product.hpp"
 
 namespace {
@@ -209,6 +212,30 @@ TEST(DenseProductThreads, ConcurrentCallersGetTheSameResults) {
     });
   for (std::thread& t : callers) t.join();
   for (const Eigen::MatrixXd& r : results) EXPECT_TRUE(same_bits(expected, r));
+}
+
+// A child made by fork() after the helpers started (a test that runs a
+// filter in a child process) has none of the parent's threads: its large
+// products must still finish, with the same bits.
+TEST(DenseProductThreads, AForkedChildComputesWithoutItsParentsHelpers) {
+  if (!mspace::avx2_fma_available()) GTEST_SKIP() << "no AVX2/FMA: large products run on one thread";
+  ThreadSetting restore;
+  std::mt19937 rng(13);
+  const Eigen::MatrixXd A = random_matrix(600, 64, rng), B = random_matrix(600, 64, rng);
+  mspace::set_product_threads(2);
+  Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(600, 600);
+  add_product(expected, 1.0, A, B, ProductPart::lower);  // the helpers are running now
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    Eigen::MatrixXd C = Eigen::MatrixXd::Zero(600, 600);
+    add_product(C, 1.0, A, B, ProductPart::lower);
+    _exit(same_bits(C, expected) ? 0 : 1);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 
 TEST(DenseProductThreads, TheSettingIsClamped) {
