@@ -22,7 +22,11 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 /// Throws a PluginError naming the instance when a plugin hands back NaN/inf.
-void require_finite(const Eigen::MatrixXd& m, const char* what, const std::string& instance,
+/// A template, so that a vector is read where it is: a `const MatrixXd&`
+/// parameter made a temporary copy of every innovation vector, one
+/// allocation per (feature, measurement) pair.
+template <class Derived>
+void require_finite(const Eigen::PlainObjectBase<Derived>& m, const char* what, const std::string& instance,
                     const LoadedPlugin& lib) {
   // A plain loop: called three times for every (feature, measurement) pair on
   // matrices of a few entries, where Eigen's allFinite() costs several times more.
@@ -671,6 +675,20 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   // the same for every feature (η = h − v: −I) makes one C_η per measurement.
   // Same inputs, same operations: the same numbers as computing them afresh.
   if (measurement_products_.size() < meas.size()) measurement_products_.resize(meas.size());
+  // Asked once per reading, not per pair: whether every d² is logged (then no
+  // pair is skipped unfactorised), and per measurement dimension the larger
+  // of the gate and new-feature thresholds.
+  const bool tracing = log_->enabled(LogLevel::Trace);
+  std::vector<double>& far_by_dim = scratch_far_;
+  far_by_dim.clear();
+  const auto far_threshold = [&](int dim) {
+    if (static_cast<int>(far_by_dim.size()) <= dim) far_by_dim.resize(static_cast<std::size_t>(dim) + 1, -1.0);
+    double& far = far_by_dim[static_cast<std::size_t>(dim)];
+    if (far < 0.0)
+      far = std::max(threshold(gate_chi2_, ac.gate_probability, dim),
+                     threshold(new_feature_chi2_, ac.new_feature_probability, dim));
+    return far;
+  };
   for (KeptProduct& kept : measurement_products_) kept.valid = false;
   for (int fi : in_range_) {
     const MapFeature& mf = map.features[fi];
@@ -722,14 +740,13 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
       // Most pairs are far apart: d² = ηᵀS⁻¹η ≥ |η|²/λ_max(S) ≥ |η|²/trace(S),
       // so when that bound is beyond both thresholds the pair can neither be
       // gated in nor make the measurement ambiguous — no factorisation needed.
-      const double far = std::max(threshold(gate_chi2_, ac.gate_probability, mi_dim),
-                                  threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
-      if (!log_->enabled(LogLevel::Trace) && S.trace() > 0.0 && in.eta.squaredNorm() > far * S.trace()) continue;
+      const double far = far_threshold(mi_dim);
+      if (!tracing && S.trace() > 0.0 && in.eta.squaredNorm() > far * S.trace()) continue;
       scratch_ldlt_.compute(S);
       if (scratch_ldlt_.info() != Eigen::Success || !(scratch_ldlt_.vectorD().array() > 0.0).all()) continue;
       const double d2 = in.eta.dot(scratch_ldlt_.solve(in.eta));
       closest[mi] = std::min(closest[mi], d2 / threshold(new_feature_chi2_, ac.new_feature_probability, mi_dim));
-      if (log_->enabled(LogLevel::Trace))
+      if (tracing)
         log_->trace("step ", map.step, ": measurement ", mi, " vs #", mf.id, " (dim ", dim, "): d2 ", d2, " eta ",
                     in.eta.transpose());
       if (d2 > threshold(gate_chi2_, ac.gate_probability, mi_dim)) continue;

@@ -256,6 +256,7 @@ class Associator {
   // estimator rows) and every (feature, measurement) pair (the rest).
   Eigen::MatrixXd scratch_J_of_, scratch_J_os_, scratch_A_, scratch_AP_, scratch_M_;
   std::vector<int> scratch_idx_;
+  std::vector<double> scratch_far_;  ///< per measurement dimension: max(gate, new-feature threshold), this reading
   Innovation scratch_innovation_;
   Eigen::MatrixXd scratch_T_, scratch_S_;
   /// J X Jᵀ for the J it was last computed with (`of` recomputes it when J's

@@ -664,6 +664,10 @@ void Slam::add_dense_information(std::vector<ReadingWork>& work) {
 // ---- Phase 4: extend -------------------------------------------------------
 
 void Slam::extend(const std::vector<int>& touched) {
+  // One view per (sensor, reading time): every feature a reading touched
+  // shares it, and nothing below changes the robot's pose or covariance (an
+  // augmentation adds rows), so it is computed once, not once per feature.
+  std::vector<SensorView> views;
   for (int fi : touched) {
     MapFeature& mf = features_[fi];
     const FeatureTypeSlot& type = types_[mf.type];
@@ -671,7 +675,11 @@ void Slam::extend(const std::vector<int>& touched) {
     std::optional<Extension> ext;
     // Touched features were observed in this step, so the current pose of
     // the sensor that saw them last is the view of their newest evidence.
-    const SensorView view = sensor_view(mf.last_sensor, mf.last_seen_t);
+    auto known = std::find_if(views.begin(), views.end(), [&](const SensorView& v) {
+      return v.sensor == mf.last_sensor && v.t == mf.last_seen_t;
+    });
+    if (known == views.end()) known = views.insert(views.end(), sensor_view(mf.last_sensor, mf.last_seen_t));
+    const SensorView view = *known;
     if (problem_ && old_dim > 0) problem_->before_extend(mf);
     ext = guarded(type.instance, *type.library, "extend", [&] { return mf.feature->extend(view); });
     if (!ext) continue;
@@ -896,6 +904,16 @@ std::string Slam::odometry_description() const {
 }
 
 void Slam::record(const DataStep& data) {
+  if (trajectory_.capacity() == 0) {
+    // Room for the steps the source announces (at most 10 million): the four
+    // per-step records then never move while they grow (on Victoria Park the
+    // moves were half of the loop's page faults).
+    const std::size_t steps = std::min<std::size_t>(size_hint(), 10'000'000);
+    trajectory_.reserve(steps);
+    dead_reckoning_.reserve(steps);
+    evaluated_.reserve(steps);
+    record_path_.reserve(steps);
+  }
   trajectory_.push_back({data.t, x_r_, kAllPoseCoords});
   dead_reckoning_.push_back({data.t, dead_reckoning_pose_, kAllPoseCoords});
   record_path_.push_back(path_distance_);
