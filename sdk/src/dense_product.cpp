@@ -56,8 +56,9 @@ int default_threads() {
     const long n = std::strtol(env, &end, 10);
     if (end != env && *end == '\0' && n >= 1 && n <= kMaxThreads) return static_cast<int>(n);
   }
-  const unsigned hw = std::thread::hardware_concurrency();
-  return hw == 0 ? 1 : static_cast<int>(std::min(hw, 4u));
+  // One thread unless asked: the second core saves 2 % on Victoria Park (docs/performance.md, fifth pass), and
+  // users who run several jobs at once (one per core) must not get twice as many busy threads as cores.
+  return 1;
 }
 
 int& threads_setting() {
