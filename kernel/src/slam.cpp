@@ -906,8 +906,8 @@ std::string Slam::odometry_description() const {
 void Slam::record(const DataStep& data) {
   if (trajectory_.capacity() == 0) {
     // Room for the steps the source announces (at most 10 million): the four
-    // per-step records then never move while they grow (on Victoria Park the
-    // moves were half of the loop's page faults).
+    // per-step records then never move while they grow (docs/performance.md,
+    // fifth pass: the moves were half of a long run's page faults).
     const std::size_t steps = std::min<std::size_t>(size_hint(), 10'000'000);
     trajectory_.reserve(steps);
     dead_reckoning_.reserve(steps);
