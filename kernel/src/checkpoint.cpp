@@ -154,12 +154,12 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
                            static_cast<double>(s.loop_checked), static_cast<double>(s.loop_false),
                            s.loop_worst_disagreement, s.seconds_loops, static_cast<double>(s.loop_unconfirmed),
                            static_cast<double>(s.loop_scan_placed), static_cast<double>(s.loop_wrong_pairs),
-                           last_revisit_path_}));
+                           last_revisit_path_, static_cast<double>(s.loop_confirmed_by_repeats)}));
   const PendingClosure& pending = pending_closure_;
   run.put("loop_pending", row_of({pending.active ? 1.0 : 0.0, pending.motion.theta, pending.motion.t.x(),
                                   pending.motion.t.y(), pending.motion.pivot.x(), pending.motion.pivot.y(),
                                   pending.sigma_translation, pending.sigma_rotation, pending.seeded ? 1.0 : 0.0,
-                                  pending.path}));
+                                  pending.path, static_cast<double>(pending.repeats)}));
   Eigen::MatrixXd pending_ids(static_cast<Eigen::Index>(pending.local_ids.size()), 1);
   for (std::size_t i = 0; i < pending.local_ids.size(); ++i) pending_ids(static_cast<Eigen::Index>(i), 0) = pending.local_ids[i];
   run.put("loop_pending_ids", pending_ids);
@@ -293,11 +293,15 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     if (association.cols() != 4 && association.cols() != 6)
       throw std::invalid_argument("run state: association has " + std::to_string(association.cols()) +
                                   " columns, expected 4 or 6");
-    // 15 entries; 14 in a checkpoint written before last_revisit_path_ was kept (then: the last anchor).
+    // 16 entries; 14 in a checkpoint written before last_revisit_path_ was kept (then: the last anchor), 15 before
+    // the closures confirmed by repeated searches were counted (then: none).
     const Eigen::MatrixXd& loops = get_state(run, "loops", 1, -1, "run state");
-    if (loops.cols() != 14 && loops.cols() != 15)
-      throw fail("run state: 'loops' has " + std::to_string(loops.cols()) + " entries, 14 or 15 expected");
-    const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, 10, "run state");
+    if (loops.cols() < 14 || loops.cols() > 16)
+      throw fail("run state: 'loops' has " + std::to_string(loops.cols()) + " entries, 14 to 16 expected");
+    // 11 entries; 10 in a checkpoint written before the pending placement's repeats were kept (then: none).
+    const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, -1, "run state");
+    if (pending_row.cols() != 10 && pending_row.cols() != 11)
+      throw fail("run state: 'loop_pending' has " + std::to_string(pending_row.cols()) + " entries, 10 or 11 expected");
     const Eigen::MatrixXd& pending_ids = get_state(run, "loop_pending_ids", -1, 1, "run state");
     const Eigen::MatrixXd& scan_index = get_state(run, "loop_scans", -1, 6, "run state");
     const Eigen::MatrixXd& scan_points = get_state(run, "loop_scan_points", -1, 2, "run state");
@@ -324,6 +328,8 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     pending.sigma_rotation = pending_row(0, 7);
     pending.seeded = pending_row(0, 8) != 0.0;
     pending.path = pending_row(0, 9);
+    if (pending_row.cols() > 10)
+      pending.repeats = static_cast<int>(integer_at(pending_row, 10, 0, 1e9, "loop_pending repeats"));
     for (Eigen::Index i = 0; i < pending_ids.rows(); ++i)
       pending.local_ids.push_back(static_cast<int>(integer_at(pending_ids.row(i), 0, 0, 1e9, "loop_pending_ids")));
     const Eigen::MatrixXd& record_path = get_state(run, "record_path", -1, 1, "run state");
@@ -391,6 +397,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     s.loop_unconfirmed = integer_at(loops, 11, 0, 1e15, "loop_unconfirmed");
     s.loop_scan_placed = integer_at(loops, 12, 0, 1e15, "loop_scan_placed");
     s.loop_wrong_pairs = integer_at(loops, 13, 0, 1e15, "loop_wrong_pairs");
+    if (loops.cols() > 15) s.loop_confirmed_by_repeats = integer_at(loops, 15, 0, 1e15, "loop_confirmed_by_repeats");
 
     // The nonlinear problem (after the estimator, whose rows it checks; its
     // live factors bind to the restored features).

@@ -43,7 +43,7 @@ const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feat
                                                    "loop_min_gap_path", "loop_drift_per_metre",
                                                    "loop_drift_deg_per_metre", "loop_min_matches",
                                                    "loop_ambiguity_ratio", "loop_scans",
-                                                   "loop_revisit_window"};
+                                                   "loop_revisit_window", "loop_confirm_repeats"};
 const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir",     "trajectory",   "map",         "summary",
@@ -542,6 +542,8 @@ AssociationConfig Reader::read_association(const Item* item) const {
     association.loop_ambiguity_ratio = number(*f, 0.1, 1.0);
   if (const Item* f = find(fields, "loop_scans")) association.loop_scans = boolean(*f);
   if (const Item* f = find(fields, "loop_revisit_window")) association.loop_revisit_window = boolean(*f);
+  if (const Item* f = find(fields, "loop_confirm_repeats"))
+    association.loop_confirm_repeats = static_cast<int>(integer(*f, 0, 100));
   return association;
 }
 
@@ -768,6 +770,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "loop_ambiguity_ratio" << YAML::Value << format_number(c.association.loop_ambiguity_ratio);
   out << YAML::Key << "loop_scans" << YAML::Value << yes_no(c.association.loop_scans);
   out << YAML::Key << "loop_revisit_window" << YAML::Value << yes_no(c.association.loop_revisit_window);
+  out << YAML::Key << "loop_confirm_repeats" << YAML::Value << std::to_string(c.association.loop_confirm_repeats);
   out << YAML::EndMap;
 
   if (c.map.search_pose) {

@@ -133,6 +133,12 @@ struct AssociationConfig {
   /// may be moved onto only by the drift since it was last seen (README,
   /// "Only a revisit widens the window").
   bool loop_revisit_window = false;
+  /// A placement waiting for confirmation is confirmed by a later search that
+  /// pairs local features it did not pair (independent evidence), or — when
+  /// the robot only crosses the old place and maps nothing new there — by
+  /// this many later searches in a row, each over a changed local map, that
+  /// find the same placement again (0: only by new pairs).
+  int loop_confirm_repeats = 0;
 };
 
 /// "nearest_neighbour" or "jcbb".

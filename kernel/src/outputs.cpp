@@ -426,6 +426,8 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     y << YAML::Key << "closures" << YAML::Value << st.loop_closures;
     y << YAML::Key << "refused_ambiguous" << YAML::Value << st.loop_ambiguous;
     y << YAML::Key << "refused_unconfirmed" << YAML::Value << st.loop_unconfirmed;
+    if (slam.config().association.loop_confirm_repeats > 0)
+      y << YAML::Key << "confirmed_by_repeats" << YAML::Value << st.loop_confirmed_by_repeats;
     y << YAML::Key << "features_merged" << YAML::Value << st.loop_merged;
     if (slam.config().association.loop_scans)
       y << YAML::Key << "placed_by_scans" << YAML::Value << st.loop_scan_placed;
@@ -605,6 +607,9 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     os << "  loop closing by map matching: " << st.loop_closures << " closures (" << st.loop_merged
        << " features merged) in " << st.loop_attempts << " searches, " << st.loop_ambiguous
        << " refused as ambiguous, " << st.loop_unconfirmed << " not confirmed by the next search"
+       << (slam.config().association.loop_confirm_repeats > 0
+               ? ", " + std::to_string(st.loop_confirmed_by_repeats) + " confirmed by repeated searches"
+               : std::string())
        << (slam.config().association.loop_scans ? ", " + std::to_string(st.loop_scan_placed) + " placed by the scans" : "");
   if (st.loop_checked > 0)
     os << "; against the ground truth " << st.loop_false << " of " << st.loop_checked

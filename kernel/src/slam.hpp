@@ -104,6 +104,7 @@ struct RunStats {
   std::int64_t loop_closures = 0;   ///< accepted
   std::int64_t loop_ambiguous = 0;  ///< refused: another placement fitted nearly as well
   std::int64_t loop_unconfirmed = 0;  ///< found, then not found again by the next search with new features
+  std::int64_t loop_confirmed_by_repeats = 0;  ///< confirmed by association.loop_confirm_repeats searches in a row
   std::int64_t loop_merged = 0;     ///< features found to duplicate older ones
   std::int64_t loop_scan_placed = 0;  ///< closures placed by the scans (association.loop_scans)
   /// With ground truth: every accepted closure checked — the robot's pose
@@ -449,6 +450,9 @@ class Slam {
     /// scans place it again confirms it without new feature pairs.
     bool seeded = false;
     double path = 0.0;  ///< path_distance_ when it was found
+    /// Later searches that found it again without new feature pairs
+    /// (association.loop_confirm_repeats).
+    int repeats = 0;
   };
   PendingClosure pending_closure_;
   std::vector<KeptScan> scans_;  ///< association.loop_scans: every range scan's end points

@@ -609,7 +609,7 @@ void Slam::close_loops(const DataStep& data) {
     std::vector<int> paired_ids;
     for (const auto& [li, oi] : match.best.pairs)
       paired_ids.push_back(features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)].id);
-    const PendingClosure& p = pending_closure_;
+    PendingClosure& p = pending_closure_;
     bool same = false, fresh = false;
     if (p.active) {
       same = agrees(p, match.best);
@@ -618,6 +618,18 @@ void Slam::close_loops(const DataStep& data) {
       });
       // Scans placed it again after half a local map of new scans.
       fresh = fresh || (p.seeded && match.best.seeded && path_distance_ - p.path >= 0.5 * a.loop_local_path);
+      // Found again, over a local map that changed since (a search runs only
+      // then), by loop_confirm_repeats searches in a row: a robot that only
+      // crosses the old place pairs the same few features each time.
+      if (same && !fresh) {
+        ++p.repeats;
+        if (a.loop_confirm_repeats > 0 && p.repeats >= a.loop_confirm_repeats) {
+          fresh = true;
+          ++stats_.loop_confirmed_by_repeats;
+          log_->debug("step ", step_, ": the waiting placement found again by ", p.repeats,
+                      " searches without new pairs: confirmed");
+        }
+      }
       if (!same) {
         ++stats_.loop_unconfirmed;
         log_->info("step ", step_, ": map matching's placement of ", match.best.pairs.size(),
