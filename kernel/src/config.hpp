@@ -136,8 +136,9 @@ struct AssociationConfig {
   /// A placement waiting for confirmation is confirmed by a later search that
   /// pairs local features it did not pair (independent evidence), or — when
   /// the robot only crosses the old place and maps nothing new there — by
-  /// this many later searches in a row, each over a changed local map, that
-  /// find the same placement again (0: only by new pairs).
+  /// this many later searches, each over a changed local map, that find the
+  /// same placement again with no other placement found in between (a search
+  /// that places nothing neither counts nor interrupts; 0: only by new pairs).
   int loop_confirm_repeats = 0;
 };
 
