@@ -98,7 +98,11 @@ void PoleFeature::apply_perturbation(const Eigen::VectorXd& dx_p) {
 bool PoleFeature::innovation(const Eigen::VectorXd& x_o, const Measurement& m,
                              Innovation& out) const {
   if (!is_pole_measurement(m) || x_o.size() != kDim) return false;
-  if (std::hypot(x_o[1], x_o[2]) < kMinRange) return false;
+  // hypot (correctly rounded, and a third of this function's instructions)
+  // only near the threshold: with x² + y² ≥ (2 kMinRange)², rounded or not,
+  // the range is far above kMinRange; NaN or an underflow goes to hypot as before.
+  const double r2 = x_o[1] * x_o[1] + x_o[2] * x_o[2];
+  if (!(r2 >= 4.0 * kMinRange * kMinRange) && std::hypot(x_o[1], x_o[2]) < kMinRange) return false;
   Eigen::Matrix3d J_ho;
   Eigen::Vector3d eta = observe(x_o, &J_ho) - m.v;
   eta[1] = wrap_angle(eta[1]);

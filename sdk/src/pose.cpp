@@ -115,6 +115,11 @@ Mat3 euler_rate_matrix(const Vec3& euler) {
 }
 
 double wrap_angle(double a) {
+  // IEEE remainder is exact: a − n·2π with n the integer nearest a / 2π, ties
+  // to even. For |a| ≤ π (2π is 2·kPi exactly, so π is kPi) n = 0 and it
+  // returns a itself; so does this early return, for (−π, π], without the
+  // library call (angle differences are mostly there: the innovations).
+  if (a > -kPi && a <= kPi) return a;
   double w = std::remainder(a, 2.0 * kPi);  // in [−π, π]
   if (w <= -kPi) w += 2.0 * kPi;
   return w;

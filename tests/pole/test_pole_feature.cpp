@@ -124,6 +124,41 @@ TEST(PoleFeature, InnovationIsZeroForSamplesAndJacobianMatches) {
   EXPECT_LT(worst, kJacobianTol);
 }
 
+TEST(PoleFeature, InnovationIsTheReferenceFormulaBitForBit) {
+  // innovation() skips hypot away from the minimum range and wrap_angle's
+  // remainder inside (−π, π]: the same bits as the plain formulas
+  // (h of eq. 16, η = h − v with the bearing wrapped), near the minimum range
+  // and far from it, with bearings on both sides of ±π.
+  PoleType type(PoleConfig{});
+  const auto f = type.create(rbd(5, 0, 0.4), view_at(Pose6::Zero()));
+  ASSERT_NE(f, nullptr);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int rejected = 0, accepted = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const double scale = i % 4 == 0 ? 3e-3 : (i % 4 == 1 ? 1e-6 : 30.0);
+    const Eigen::Vector3d x_o(0.3 + 0.1 * u(rng), scale * u(rng), scale * u(rng));
+    const Measurement m = rbd(scale * (1.0 + u(rng)), kPi * u(rng) * 1.2, 0.5 + 0.1 * u(rng));
+    const bool expected = std::hypot(x_o[1], x_o[2]) >= kMinRange;
+    Innovation in;
+    ASSERT_EQ(f->innovation(x_o, m, in), expected) << x_o.transpose();
+    if (!expected) {
+      ++rejected;
+      continue;
+    }
+    ++accepted;
+    const double x = x_o[1], y = x_o[2], r2 = x * x + y * y;
+    Eigen::Vector3d eta(std::sqrt(r2) - m.v[0], std::atan2(y, x) - m.v[1], 2.0 * x_o[0] - m.v[2]);
+    double w = std::remainder(eta[1], 2.0 * kPi);
+    if (w <= -kPi) w += 2.0 * kPi;
+    eta[1] = w;
+    ASSERT_EQ(in.eta.size(), 3);
+    for (int k = 0; k < 3; ++k) ASSERT_EQ(in.eta[k], eta[k]) << k << " at " << x_o.transpose();
+  }
+  EXPECT_GT(rejected, 1000);
+  EXPECT_GT(accepted, 10000);
+}
+
 TEST(PoleFeature, RejectsOtherKindsAndDegenerateGeometry) {
   PoleType type(PoleConfig{});
   const SensorView view = view_at(Pose6::Zero());

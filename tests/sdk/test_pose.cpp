@@ -5,8 +5,12 @@
 #include <Eigen/Geometry>
 
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <numbers>
+#include <random>
 #include <stdexcept>
+#include <vector>
 
 #include "maths_test_support.hpp"
 #include "mspace/pose.hpp"
@@ -59,6 +63,33 @@ TEST(Pose, RotationIsRzRyRx) {
   // Pitch by +90°: x axis points down; roll by +90°: y axis points up.
   EXPECT_TRUE((rotation(make_pose(0, 0, 0, 0, kPi / 2, 0)) * Vec3::UnitX()).isApprox(-Vec3::UnitZ()));
   EXPECT_TRUE((rotation(make_pose(0, 0, 0, 0, 0, kPi / 2)) * Vec3::UnitY()).isApprox(Vec3::UnitZ()));
+}
+
+TEST(Pose, WrapAngleIsTheRemainderBitForBit) {
+  // wrap_angle returns angles in (−π, π] unchanged without calling
+  // std::remainder: the same bits as the remainder formula everywhere.
+  const auto by_remainder = [](double a) {
+    double w = std::remainder(a, 2.0 * kPi);
+    if (w <= -kPi) w += 2.0 * kPi;
+    return w;
+  };
+  std::vector<double> angles = {0.0, -0.0, kPi, -kPi, 2 * kPi, -2 * kPi, 1e-300, -1e-300, 3.0, -3.0, 7.0, -7.0,
+                                1e6, -1e6};
+  for (double a : {kPi, -kPi, 2 * kPi, 3 * kPi}) {
+    angles.push_back(std::nextafter(a, 0.0));
+    angles.push_back(std::nextafter(a, 10.0 * a));
+    angles.push_back(-std::nextafter(a, 0.0));
+    angles.push_back(-std::nextafter(a, 10.0 * a));
+  }
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-20.0, 20.0);
+  for (int i = 0; i < 100000; ++i) angles.push_back(u(rng));
+  for (double a : angles) {
+    const double w = wrap_angle(a), r = by_remainder(a);
+    EXPECT_EQ(std::memcmp(&w, &r, sizeof(double)), 0) << a;
+  }
+  EXPECT_TRUE(std::isnan(wrap_angle(std::numeric_limits<double>::quiet_NaN())));
+  EXPECT_TRUE(std::isnan(wrap_angle(std::numeric_limits<double>::infinity())));
 }
 
 TEST(Pose, WrapAngleGivesHalfOpenInterval) {
