@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <string>
 #include <tuple>
@@ -150,6 +151,23 @@ RelationErrors long_relations(const fs::path& dir, const std::vector<StampedPose
   return evaluate_relations(trajectory, far, 1e-4);
 }
 
+/// config/intel_walls.yaml on the building in `dir`, changed by `adjust`, run
+/// to the end: its statistics and its long relations.
+struct WallsRun {
+  RunStats stats;
+  RelationErrors long_relations;
+};
+WallsRun run_intel_walls(const fs::path& dir, const sim_building::LaserSpec& laser,
+                         const std::function<void(RunConfig&)>& adjust) {
+  PluginRegistry registry;
+  registry.add_search_dir(MSPACE_PLUGIN_DIR);
+  RunConfig config = intel_walls_on(dir, laser, registry);
+  adjust(config);
+  Slam slam(config, registry);
+  run_quietly(slam);
+  return {slam.stats(), long_relations(dir, slam.trajectory())};
+}
+
 TEST(LoopClosingRun, RingClosesItsLoopAfterALoggingGap) { check("ring", 1, true); }
 
 TEST(LoopClosingRun, SymmetricBuildingHasNoFalseClosure) { check("symmetric", 1, false); }
@@ -187,21 +205,17 @@ TEST(LoopClosingRun, LRingClosesAfterGapsWithoutAFalseClosure) { check("l_ring",
 TEST(LoopClosingRun, ScansCloseASparseLoopTheFeaturesCannot) {
   set_log_level(LogLevel::Warn);
   const auto [dir, laser] = logged_building("symmetric", 6, "robotlaser_logged");
-  PluginRegistry registry;
-  registry.add_search_dir(MSPACE_PLUGIN_DIR);
   const auto run_with = [&](bool scans) {
-    RunConfig config = intel_walls_on(dir, laser, registry);
-    EXPECT_TRUE(config.association.loop_closing);
-    config.association.loop_scans = scans;
-    Slam slam(config, registry);
-    run_quietly(slam);
-    const RelationErrors e = long_relations(dir, slam.trajectory());
-    std::cout << (scans ? "with" : "without") << " scans: " << slam.stats().loop_closures << " closures ("
-              << slam.stats().loop_scan_placed << " placed by the scans), " << slam.stats().loop_false
+    const auto [stats, e] = run_intel_walls(dir, laser, [&](RunConfig& config) {
+      EXPECT_TRUE(config.association.loop_closing);
+      config.association.loop_scans = scans;
+    });
+    std::cout << (scans ? "with" : "without") << " scans: " << stats.loop_closures << " closures ("
+              << stats.loop_scan_placed << " placed by the scans), " << stats.loop_false
               << " false; long relations " << e.translation.mean << " m over " << e.matched << "\n";
     EXPECT_GT(e.matched, 10u);
-    EXPECT_EQ(slam.stats().loop_wrong_pairs, 0);
-    return std::tuple{slam.stats().loop_scan_placed, slam.stats().loop_false, e.translation.mean};
+    EXPECT_EQ(stats.loop_wrong_pairs, 0);
+    return std::tuple{stats.loop_scan_placed, stats.loop_false, e.translation.mean};
   };
   const auto [placed_without, false_without, long_without] = run_with(false);
   const auto [placed_with, false_with, long_with] = run_with(true);
@@ -260,22 +274,17 @@ TEST(LoopClosingRun, LongLoopWithGapsIsNoWorseThanItsOdometry) {
 TEST(LoopClosingRun, ACrossingIsConfirmedByRepeatedSearches) {
   set_log_level(LogLevel::Warn);
   const auto [dir, laser] = logged_building("long_loop", 1, "robotlaser_logged");
-  PluginRegistry registry;
-  registry.add_search_dir(MSPACE_PLUGIN_DIR);
   const auto run_with = [&](int repeats) {
-    RunConfig config = intel_walls_on(dir, laser, registry);
-    config.association.loop_confirm_repeats = repeats;
-    Slam slam(config, registry);
-    run_quietly(slam);
-    const RelationErrors e = long_relations(dir, slam.trajectory());
-    std::cout << "loop_confirm_repeats " << repeats << ": " << slam.stats().loop_closures << " closures ("
-              << slam.stats().loop_confirmed_by_repeats << " confirmed by repeats), " << slam.stats().loop_false
-              << " false, " << slam.stats().loop_wrong_pairs << " pairing a wrong object; long relations "
-              << e.translation.mean << " m over " << e.matched << "\n";
+    const auto [stats, e] =
+        run_intel_walls(dir, laser, [&](RunConfig& config) { config.association.loop_confirm_repeats = repeats; });
+    std::cout << "loop_confirm_repeats " << repeats << ": " << stats.loop_closures << " closures ("
+              << stats.loop_confirmed_by_repeats << " confirmed by repeats), " << stats.loop_false << " false, "
+              << stats.loop_wrong_pairs << " pairing a wrong object; long relations " << e.translation.mean
+              << " m over " << e.matched << "\n";
     EXPECT_GT(e.matched, 10u);
-    EXPECT_EQ(slam.stats().loop_false, 0);
-    EXPECT_EQ(slam.stats().loop_wrong_pairs, 0);
-    return std::tuple{slam.stats().loop_closures, slam.stats().loop_confirmed_by_repeats, e.translation.mean};
+    EXPECT_EQ(stats.loop_false, 0);
+    EXPECT_EQ(stats.loop_wrong_pairs, 0);
+    return std::tuple{stats.loop_closures, stats.loop_confirmed_by_repeats, e.translation.mean};
   };
   const auto [closures_without, repeats_without, long_without] = run_with(0);
   const auto [closures_with, repeats_with, long_with] = run_with(2);
