@@ -7,6 +7,7 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <sstream>
 #include <tuple>
 
 #include <Eigen/Cholesky>
@@ -621,6 +622,7 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   };
 
   std::vector<MapMatchHypothesis> verified;
+  std::string seed_fate;  // why a placement of the other evidence was dropped (for the reason below)
   std::vector<std::pair<PlanarMotion, bool>> starts;  // (motion, seeded)
   for (const Peak& p : kept) starts.emplace_back(PlanarMotion{p.theta, p.t, pivot}, false);
   for (const PlanarMotion& seed : options.seeds) starts.emplace_back(seed, true);
@@ -641,7 +643,10 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     }
     h.motion.theta = std::remainder(h.motion.theta, 2.0 * std::numbers::pi);
     pair_up(h.motion, false, h, H, grad);  // the pairing at the refined motion
-    if (h.pairs.empty()) continue;
+    if (h.pairs.empty()) {
+      if (seeded) seed_fate = "no feature pairs there";
+      continue;
+    }
     h.jointly_compatible = h.dof > 0 && h.d2 <= chi2(h.dof);
     const Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
     if (ldlt.info() == Eigen::Success && ldlt.isPositive() && ldlt.vectorD().minCoeff() > 0.0) {
@@ -662,6 +667,15 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     const bool kept_to_seed =
         !seeded || ((h.motion.apply(pivot) - start.apply(pivot)).norm() <= options.seed_tolerance_translation &&
                     angle_apart(h.motion.theta, start.theta) <= options.seed_tolerance_rotation);
+    if (seeded && !(inside && kept_to_seed)) {
+      std::ostringstream fate;
+      fate.precision(3);
+      fate << "its " << h.pairs.size() << " feature pairs pull it "
+           << (h.motion.apply(pivot) - start.apply(pivot)).norm() << " m, "
+           << angle_apart(h.motion.theta, start.theta) * 180.0 / std::numbers::pi << " deg away"
+           << (inside ? "" : ", outside the window");
+      seed_fate = fate.str();
+    }
     if (inside && kept_to_seed) verified.push_back(std::move(h));
   }
   result.hypotheses = static_cast<int>(verified.size());
@@ -692,6 +706,7 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
   if (verified.empty()) {
     result.reason = kept.empty() ? "no translation got " + std::to_string(o.min_matches) + " votes"
                                  : "no hypothesis survived refinement";
+    if (!seed_fate.empty()) result.reason += "; the other evidence's placement dropped: " + seed_fate;
     return result;
   }
   std::size_t best = 0;
@@ -730,6 +745,7 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     else
       result.reason = "best pairing does not fix the motion (σ " + std::to_string(b.sigma_translation) + " m, " +
                       std::to_string(b.sigma_rotation * 180.0 / std::numbers::pi) + " deg)";
+    if (!seed_fate.empty()) result.reason += "; the other evidence's placement dropped: " + seed_fate;
     return result;
   }
   if (result.rival_matches >= o.ambiguity_ratio * result.best_matches) {

@@ -331,9 +331,15 @@ class Slam {
   /// object: residual ≤ 0.3 m in the true frame — a local feature taken there through the current pose, an old
   /// one through the pose that last saw it), and how many could be checked: whether a failed search had
   /// anything to find (the debug log).
-  std::optional<std::pair<int, int>> true_counterparts(const std::vector<FeatureShape>& local,
-                                                       const std::vector<FeatureShape>& old,
-                                                       const DataStep& data) const;
+  /// With each counterpart found, the motion about the robot that would lay that local feature onto its old
+  /// one in the estimate (θ, Δx, Δy of the robot): what a right placement must be, and — where the counterparts
+  /// need different motions — how far the old map's passes disagree with each other there.
+  struct TrueCounterparts {
+    int found = 0, checked = 0;
+    std::vector<Eigen::Vector3d> needed;
+  };
+  std::optional<TrueCounterparts> true_counterparts(const std::vector<FeatureShape>& local,
+                                                    const std::vector<FeatureShape>& old, const DataStep& data) const;
   /// For the debug log of a refused search: how far its best placement and the estimate are from the truth, and
   /// how many local features had a true counterpart to pair with.
   std::string ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& local,

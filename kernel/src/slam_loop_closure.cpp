@@ -229,9 +229,9 @@ std::optional<PlanarMotion> Slam::estimate_to_truth_at(double path) const {
   return PlanarMotion{wrap_angle(gt->pose[kTheta] - est.pose[kTheta]), t_gt - t_est, t_est};
 }
 
-std::optional<std::pair<int, int>> Slam::true_counterparts(const std::vector<FeatureShape>& local,
-                                                           const std::vector<FeatureShape>& old,
-                                                           const DataStep& data) const {
+std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<FeatureShape>& local,
+                                                             const std::vector<FeatureShape>& old,
+                                                             const DataStep& data) const {
   if (!data.ground_truth || ground_truth_.empty()) return std::nullopt;
   const Pose6& truth_now = *data.ground_truth;
   const Eigen::Vector2d here(x_r_[kX], x_r_[kY]);
@@ -240,29 +240,55 @@ std::optional<std::pair<int, int>> Slam::true_counterparts(const std::vector<Fea
   std::vector<std::optional<PlanarMotion>> old_to_truth;
   for (const FeatureShape& b : old)
     old_to_truth.push_back(estimate_to_truth_at(features_[static_cast<std::size_t>(b.feature)].last_seen_path));
-  int found = 0, checked = 0;
+  TrueCounterparts c;
   for (const FeatureShape& a : local) {
-    bool any = false, has = false;
-    for (std::size_t j = 0; j < old.size() && !has; ++j) {
+    bool any = false;
+    std::optional<std::size_t> counterpart;
+    for (std::size_t j = 0; j < old.size() && !counterpart; ++j) {
       if (!old_to_truth[j] || old[j].type != a.type) continue;
       const auto d = distance_apart(a, local_to_truth, old[j], *old_to_truth[j]);
       if (!d) continue;
       any = true;
-      has = *d <= 0.3;
+      if (*d <= 0.3) counterpart = j;
     }
-    checked += any ? 1 : 0;
-    found += has ? 1 : 0;
+    c.checked += any ? 1 : 0;
+    if (!counterpart) continue;
+    ++c.found;
+    // The robot taken to the truth through the current pose, then back into the estimate through the pose that
+    // last saw the old feature (G⁻¹: q ↦ R(−θ)(q − pivot − t) + pivot).
+    const PlanarMotion& G = *old_to_truth[*counterpart];
+    const Eigen::Vector2d q = local_to_truth.apply(here) - G.pivot - G.t;
+    const double cos_t = std::cos(G.theta), sin_t = std::sin(G.theta);
+    const Eigen::Vector2d back = Eigen::Vector2d(cos_t * q.x() + sin_t * q.y(), -sin_t * q.x() + cos_t * q.y()) + G.pivot;
+    const Eigen::Vector2d moved = back - here;
+    c.needed.emplace_back(wrap_angle(local_to_truth.theta - G.theta), moved.x(), moved.y());
   }
-  if (checked == 0) return std::nullopt;
-  return std::pair{found, checked};
+  if (c.checked == 0) return std::nullopt;
+  return c;
 }
 
 std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& local,
                                       const std::vector<FeatureShape>& old, const DataStep& data) const {
   std::ostringstream out;
   out.precision(3);
-  if (const auto c = true_counterparts(local, old, data))
-    out << " (ground truth: " << c->first << " of " << c->second << " local features are old ones of the window)";
+  if (const auto c = true_counterparts(local, old, data)) {
+    out << " (ground truth: " << c->found << " of " << c->checked << " local features are old ones of the window";
+    if (!c->needed.empty()) {
+      // The component-wise median, and how far the counterparts' own motions lie from it.
+      Eigen::Vector3d median;
+      for (int k = 0; k < 3; ++k) {
+        std::vector<double> v;
+        for (const Eigen::Vector3d& n : c->needed) v.push_back(n[k]);
+        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+        median[k] = v[v.size() / 2];
+      }
+      double spread = 0.0;
+      for (const Eigen::Vector3d& n : c->needed) spread = std::max(spread, (n.tail<2>() - median.tail<2>()).norm());
+      out << "; laying them on it needs " << median.tail<2>().norm() << " m, " << median[0] * 180.0 / std::numbers::pi
+          << " deg (median), their own needs up to " << spread << " m apart";
+    }
+    out << ")";
+  }
   if (match.best.pairs.empty()) return out.str();
   std::vector<double> seen;
   for (const auto& [li, oi] : match.best.pairs)
