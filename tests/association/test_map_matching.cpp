@@ -219,7 +219,12 @@ TEST(MapMatching, ASeedFixesWhatParallelWallsLeaveFree) {
   o.seeds = {turned};
   o.dense_score = [&](const PlanarMotion& T) { return 1.0 - (T.t - turned.t).norm(); };
   ASSERT_NEAR(o.seed_tolerance_rotation, 0.035, 1e-12);
-  EXPECT_FALSE(match_local_map(local, old, {5, 1}, o).accepted);
+  const MapMatch refused = match_local_map(local, old, {5, 1}, o);
+  EXPECT_FALSE(refused.accepted);
+  // The refusal says what became of the seed: how far its pairs pulled it.
+  EXPECT_NE(refused.reason.find("the other evidence's placement dropped: its 2 feature pairs pull it"),
+            std::string::npos)
+      << refused.reason;
   o.seed_tolerance_rotation = 0.1;
   const MapMatch loose = match_local_map(local, old, {5, 1}, o);
   ASSERT_TRUE(loose.accepted) << loose.reason;
