@@ -259,7 +259,8 @@ std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<
     const PlanarMotion& G = *old_to_truth[*counterpart];
     const Eigen::Vector2d q = local_to_truth.apply(here) - G.pivot - G.t;
     const double cos_t = std::cos(G.theta), sin_t = std::sin(G.theta);
-    const Eigen::Vector2d back = Eigen::Vector2d(cos_t * q.x() + sin_t * q.y(), -sin_t * q.x() + cos_t * q.y()) + G.pivot;
+    const Eigen::Vector2d back =
+        Eigen::Vector2d(cos_t * q.x() + sin_t * q.y(), -sin_t * q.x() + cos_t * q.y()) + G.pivot;
     const Eigen::Vector2d moved = back - here;
     c.needed.emplace_back(wrap_angle(local_to_truth.theta - G.theta), moved.x(), moved.y());
   }
