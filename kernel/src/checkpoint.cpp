@@ -154,7 +154,8 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
                            static_cast<double>(s.loop_checked), static_cast<double>(s.loop_false),
                            s.loop_worst_disagreement, s.seconds_loops, static_cast<double>(s.loop_unconfirmed),
                            static_cast<double>(s.loop_scan_placed), static_cast<double>(s.loop_wrong_pairs),
-                           last_revisit_path_, static_cast<double>(s.loop_confirmed_by_repeats)}));
+                           last_revisit_path_, static_cast<double>(s.loop_confirmed_by_repeats),
+                           static_cast<double>(s.loop_wide_searches), static_cast<double>(s.loop_wide_closures)}));
   const PendingClosure& pending = pending_closure_;
   run.put("loop_pending", row_of({pending.active ? 1.0 : 0.0, pending.motion.theta, pending.motion.t.x(),
                                   pending.motion.t.y(), pending.motion.pivot.x(), pending.motion.pivot.y(),
@@ -296,8 +297,8 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     // 16 entries; 14 in a checkpoint written before last_revisit_path_ was kept (then: the last anchor), 15 before
     // the closures confirmed by repeated searches were counted (then: none).
     const Eigen::MatrixXd& loops = get_state(run, "loops", 1, -1, "run state");
-    if (loops.cols() < 14 || loops.cols() > 16)
-      throw fail("run state: 'loops' has " + std::to_string(loops.cols()) + " entries, 14 to 16 expected");
+    if (loops.cols() < 14 || loops.cols() > 18 || loops.cols() == 17)
+      throw fail("run state: 'loops' has " + std::to_string(loops.cols()) + " entries, 14, 15, 16 or 18 expected");
     // 11 entries; 10 in a checkpoint written before the pending placement's repeats were kept (then: none).
     const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, -1, "run state");
     if (pending_row.cols() != 10 && pending_row.cols() != 11)
@@ -398,6 +399,10 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     s.loop_scan_placed = integer_at(loops, 12, 0, 1e15, "loop_scan_placed");
     s.loop_wrong_pairs = integer_at(loops, 13, 0, 1e15, "loop_wrong_pairs");
     if (loops.cols() > 15) s.loop_confirmed_by_repeats = integer_at(loops, 15, 0, 1e15, "loop_confirmed_by_repeats");
+    if (loops.cols() > 17) {
+      s.loop_wide_searches = integer_at(loops, 16, 0, 1e15, "loop_wide_searches");
+      s.loop_wide_closures = integer_at(loops, 17, 0, 1e15, "loop_wide_closures");
+    }
 
     // The nonlinear problem (after the estimator, whose rows it checks; its
     // live factors bind to the restored features).

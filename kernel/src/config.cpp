@@ -43,7 +43,8 @@ const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feat
                                                    "loop_min_gap_path", "loop_drift_per_metre",
                                                    "loop_drift_deg_per_metre", "loop_min_matches",
                                                    "loop_ambiguity_ratio", "loop_scans",
-                                                   "loop_revisit_window", "loop_confirm_repeats"};
+                                                   "loop_revisit_window", "loop_confirm_repeats",
+                                                   "loop_wide_drift_per_metre"};
 const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir",     "trajectory",   "map",         "summary",
@@ -544,6 +545,12 @@ AssociationConfig Reader::read_association(const Item* item) const {
   if (const Item* f = find(fields, "loop_revisit_window")) association.loop_revisit_window = boolean(*f);
   if (const Item* f = find(fields, "loop_confirm_repeats"))
     association.loop_confirm_repeats = static_cast<int>(integer(*f, 0, 100));
+  if (const Item* f = find(fields, "loop_wide_drift_per_metre")) {
+    association.loop_wide_drift_per_metre = number(*f, 0.0, 1.0);
+    if (association.loop_wide_drift_per_metre > 0.0 && !association.loop_revisit_window)
+      fail(*f, "needs loop_revisit_window: true (the wider window is reckoned from the travel since each old "
+               "feature was last seen)");
+  }
   return association;
 }
 
@@ -771,6 +778,8 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "loop_scans" << YAML::Value << yes_no(c.association.loop_scans);
   out << YAML::Key << "loop_revisit_window" << YAML::Value << yes_no(c.association.loop_revisit_window);
   out << YAML::Key << "loop_confirm_repeats" << YAML::Value << std::to_string(c.association.loop_confirm_repeats);
+  out << YAML::Key << "loop_wide_drift_per_metre" << YAML::Value
+      << format_number(c.association.loop_wide_drift_per_metre);
   out << YAML::EndMap;
 
   if (c.map.search_pose) {

@@ -140,6 +140,14 @@ struct AssociationConfig {
   /// same placement again with no other placement found in between (a search
   /// that places nothing neither counts nor interrupts; 0: only by new pairs).
   int loop_confirm_repeats = 0;
+  /// A second, wider search when the first placed nothing (0: off; needs
+  /// loop_revisit_window): its window reaches as far as a nearby old feature
+  /// can have drifted at this many metres per metre of the travel since the
+  /// robot last saw it — a drift rate measured on closures, not a bound —
+  /// and each pair is held to the same rate. A placement there must be
+  /// found twice like any other, and one the scans seeded must explain half
+  /// of their end points (README, "A second search in a wider window").
+  double loop_wide_drift_per_metre = 0.0;
 };
 
 /// "nearest_neighbour" or "jcbb".

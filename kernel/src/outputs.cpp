@@ -428,6 +428,10 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     y << YAML::Key << "refused_unconfirmed" << YAML::Value << st.loop_unconfirmed;
     if (slam.config().association.loop_confirm_repeats > 0)
       y << YAML::Key << "confirmed_by_repeats" << YAML::Value << st.loop_confirmed_by_repeats;
+    if (slam.config().association.loop_wide_drift_per_metre > 0.0) {
+      y << YAML::Key << "wide_window_searches" << YAML::Value << st.loop_wide_searches;
+      y << YAML::Key << "wide_window_closures" << YAML::Value << st.loop_wide_closures;
+    }
     y << YAML::Key << "features_merged" << YAML::Value << st.loop_merged;
     if (slam.config().association.loop_scans)
       y << YAML::Key << "placed_by_scans" << YAML::Value << st.loop_scan_placed;
@@ -609,6 +613,10 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
        << " refused as ambiguous, " << st.loop_unconfirmed << " not confirmed by the next search"
        << (slam.config().association.loop_confirm_repeats > 0
                ? ", " + std::to_string(st.loop_confirmed_by_repeats) + " confirmed by repeated searches"
+               : std::string())
+       << (slam.config().association.loop_wide_drift_per_metre > 0.0
+               ? ", " + std::to_string(st.loop_wide_closures) + " placed by " + std::to_string(st.loop_wide_searches) +
+                     " searches in the wider window"
                : std::string())
        << (slam.config().association.loop_scans ? ", " + std::to_string(st.loop_scan_placed) + " placed by the scans" : "");
   if (st.loop_checked > 0)

@@ -105,6 +105,8 @@ struct RunStats {
   std::int64_t loop_ambiguous = 0;  ///< refused: another placement fitted nearly as well
   std::int64_t loop_unconfirmed = 0;  ///< found, then not found again by the next search with new features
   std::int64_t loop_confirmed_by_repeats = 0;  ///< confirmed by association.loop_confirm_repeats searches in a row
+  std::int64_t loop_wide_searches = 0;  ///< second searches in the wider window (association.loop_wide_drift_per_metre)
+  std::int64_t loop_wide_closures = 0;  ///< closures placed by such a search
   std::int64_t loop_merged = 0;     ///< features found to duplicate older ones
   std::int64_t loop_scan_placed = 0;  ///< closures placed by the scans (association.loop_scans)
   /// With ground truth: every accepted closure checked — the robot's pose
@@ -359,6 +361,9 @@ class Slam {
   void relate_to_old_pose(const PlanarMotion& T, const MapMatchHypothesis& h);
   /// Keeps this step's range scans when association.loop_scans is on.
   void keep_scans(const DataStep& data);
+  /// The debug line of a scans' placement, with the ground truth's verdict when it is known.
+  void log_scan_placement(const ScanPlacement& scans, std::size_t points, const std::vector<FeatureShape>& old,
+                          const Eigen::Vector2d& here, const DataStep& data) const;
   /// The recent scans (the last loop_local_path m) placed on the old ones
   /// (over loop_min_gap_path m ago) within the window `o` about `here`
   /// (scan_evidence.hpp); `field` receives the old scans' field.

@@ -365,6 +365,41 @@ constexpr double kScanAgreement = 0.8;
 /// The scans' best placement is unique when no clearly different one scores
 /// this fraction of it.
 constexpr double kScanUniqueRatio = 0.9;
+/// In the wider window (association.loop_wide_drift_per_metre) the scans'
+/// placement is tried as a hypothesis only when it explains this much: the
+/// window holds many more places that a few feature pairs could confirm by
+/// chance (on 216 generated buildings, the two weakest false closures of a
+/// single wide window were scans' placements scoring 0.47 and 0.48, 14 m and
+/// 5 m along a corridor; README, "A second search in a wider window").
+constexpr double kScanWideMinScore = 0.5;
+
+void Slam::log_scan_placement(const ScanPlacement& scans, std::size_t points, const std::vector<FeatureShape>& old,
+                              const Eigen::Vector2d& here, const DataStep& data) const {
+  const AssociationConfig& a = config_.association;
+  std::vector<double> seen;
+  for (const FeatureShape& f : old) seen.push_back(features_[static_cast<std::size_t>(f.feature)].created_path);
+  const auto truth = disagreement_with_ground_truth(scans.best, seen, data);
+  std::ostringstream what;
+  what.precision(3);
+  what << "step " << step_ << ": scans placed " << points << " end points (" << scans.best.t.norm() << " m, "
+       << scans.best.theta * 180.0 / std::numbers::pi << " deg), score " << scans.score
+       << ", best clearly different placement " << scans.rival_score << " (" << scans.leaves << " placements scored)";
+  if (truth) what << "; ground truth: " << truth->first << " m, " << truth->second * 180.0 / std::numbers::pi << " deg off";
+  // Against the old scans taken within 2 m of where the placement puts
+  // the robot: the old map may hold several passes that disagree.
+  const Eigen::Vector2d placed = scans.best.apply(here);
+  std::vector<double> paths;
+  for (const KeptScan& s : scans_) {
+    if (s.path > path_distance_ - a.loop_min_gap_path) break;
+    if (s.record >= trajectory_.size()) continue;
+    const Pose6& x = trajectory_[s.record].pose;
+    if ((Eigen::Vector2d(x[kX], x[kY]) - placed).norm() < 2.0) paths.push_back(s.path);
+  }
+  if (const auto local_truth = disagreement_with_ground_truth(scans.best, paths, data))
+    what << "; against the old scans there: " << local_truth->first << " m, "
+         << local_truth->second * 180.0 / std::numbers::pi << " deg off";
+  log_->debug(what.str());
+}
 
 void Slam::keep_scans(const DataStep& data) {
   for (const SensorReading& reading : data.readings) {
@@ -524,72 +559,108 @@ void Slam::close_loops(const DataStep& data) {
     o.pair_base_translation = 3.0 * sigma_xy + a.loop_drift_per_metre * unanchored;
     o.pair_base_rotation = 3.0 * sigma_theta + drift_rad_per_metre * unanchored;
   }
-  const double reach = a.loop_local_path + o.max_translation;
-  std::vector<int> nearby;
-  for (int i : old_idx)
-    if (planar_distance(*features_[static_cast<std::size_t>(i)].feature, here) <= reach) nearby.push_back(i);
-  if (nearby.empty()) return;
-  ++stats_.loop_attempts;
-
-  std::vector<FeatureShape> local, old;
+  std::vector<FeatureShape> local;
   for (int i : local_idx) local.push_back(estimated_shape(i));
-  // With loop_revisit_window, the travel since each was last seen: the path, or — across a logging gap whose
-  // odometry holds only the net displacement — the robot's typical speed times the time, whichever is longer.
+  // With loop_revisit_window, the travel since each old feature was last seen: the path, or — across a logging gap
+  // whose odometry holds only the net displacement — the robot's typical speed times the time, whichever is longer.
   const double speed = a.loop_revisit_window ? typical_speed() : 0.0;
-  for (int i : nearby) {
-    FeatureShape s = estimated_shape(i);
-    const MapFeature& mf = features_[static_cast<std::size_t>(i)];
-    if (a.loop_revisit_window)
-      s.travel_unseen = std::max(path_distance_ - mf.last_seen_path, speed * (t_ - mf.last_seen_t));
-    old.push_back(std::move(s));
-  }
-  // The scans' own placement (association.loop_scans): a feature placement
-  // they contradict is refused, and a placement they find unique is tried
-  // as a hypothesis of its own (loop_closing.hpp, dense evidence).
-  std::unique_ptr<ScanField> field;
-  std::vector<Eigen::Vector2d> scan_points;
-  ScanPlacement scans;
-  if (a.loop_scans) {
-    scans = place_scans(here, o, field, scan_points);
-    if (scans.found && scans.score >= kScanMinScore) {
-      o.dense_score = [&](const PlanarMotion& T) { return field->score(scan_points, T); };
-      o.dense_floor = kScanAgreement * scans.score;
-      if (scans.rival_score < kScanUniqueRatio * scans.score) o.seeds.push_back(scans.best);
-      // The scans' placement is good to a few σ of their field and a rotation step or two.
-      o.seed_tolerance_translation = 3.0 * kScanSigma;
-      o.seed_tolerance_rotation = 2.0 * kScanRotationStep;
+  const auto travel_unseen = [&](const MapFeature& mf) {
+    return std::max(path_distance_ - mf.last_seen_path, speed * (t_ - mf.last_seen_t));
+  };
+
+  // One search in one window: the old features it can reach, the scans'
+  // placement there, and the features' placement.
+  struct Search {
+    MapMatchOptions o;
+    std::vector<FeatureShape> old;
+    std::unique_ptr<ScanField> field;
+    std::vector<Eigen::Vector2d> scan_points;
+    ScanPlacement scans;
+    MapMatch match;
+    bool wide = false;
+  };
+  const auto search = [&](Search& s, const std::vector<int>& nearby) {
+    MapMatchOptions& so = s.o;
+    for (int i : nearby) {
+      FeatureShape shape = estimated_shape(i);
+      if (a.loop_revisit_window) shape.travel_unseen = travel_unseen(features_[static_cast<std::size_t>(i)]);
+      s.old.push_back(std::move(shape));
     }
-    if (log_->enabled(LogLevel::Debug)) {
-      std::vector<double> seen;
-      for (const FeatureShape& f : old) seen.push_back(features_[static_cast<std::size_t>(f.feature)].created_path);
-      const auto truth = disagreement_with_ground_truth(scans.best, seen, data);
-      std::ostringstream what;
-      what.precision(3);
-      what << "step " << step_ << ": scans placed " << scan_points.size() << " end points (" << scans.best.t.norm()
-           << " m, " << scans.best.theta * 180.0 / std::numbers::pi << " deg), score " << scans.score
-           << ", best clearly different placement " << scans.rival_score << " (" << scans.leaves
-           << " placements scored)";
-      if (truth) what << "; ground truth: " << truth->first << " m, " << truth->second * 180.0 / std::numbers::pi << " deg off";
-      // Against the old scans taken within 2 m of where the placement puts
-      // the robot: the old map may hold several passes that disagree.
-      const auto near_placed = [&](const PlanarMotion& T) {
-        const Eigen::Vector2d placed = T.apply(here);
-        std::vector<double> paths;
-        for (const KeptScan& s : scans_) {
-          if (s.path > path_distance_ - a.loop_min_gap_path) break;
-          if (s.record >= trajectory_.size()) continue;
-          const Pose6& x = trajectory_[s.record].pose;
-          if ((Eigen::Vector2d(x[kX], x[kY]) - placed).norm() < 2.0) paths.push_back(s.path);
-        }
-        return disagreement_with_ground_truth(T, paths, data);
-      };
-      if (const auto local_truth = near_placed(scans.best))
-        what << "; against the old scans there: " << local_truth->first << " m, "
-             << local_truth->second * 180.0 / std::numbers::pi << " deg off";
-      log_->debug(what.str());
+    // The scans' own placement (association.loop_scans): a feature placement
+    // they contradict is refused, and a placement they find unique is tried
+    // as a hypothesis of its own (loop_closing.hpp, dense evidence) — in the
+    // wider window only when it explains kScanWideMinScore of the end points.
+    if (a.loop_scans) {
+      s.scans = place_scans(here, so, s.field, s.scan_points);
+      if (s.scans.found && s.scans.score >= kScanMinScore) {
+        so.dense_score = [&s](const PlanarMotion& T) { return s.field->score(s.scan_points, T); };
+        so.dense_floor = kScanAgreement * s.scans.score;
+        if (s.scans.rival_score < kScanUniqueRatio * s.scans.score && (!s.wide || s.scans.score >= kScanWideMinScore))
+          so.seeds.push_back(s.scans.best);
+        // The scans' placement is good to a few σ of their field and a rotation step or two.
+        so.seed_tolerance_translation = 3.0 * kScanSigma;
+        so.seed_tolerance_rotation = 2.0 * kScanRotationStep;
+      }
+      if (log_->enabled(LogLevel::Debug)) log_scan_placement(s.scans, s.scan_points.size(), s.old, here, data);
+    }
+    s.match = match_local_map(local, s.old, here, so);
+  };
+
+  Search narrow;
+  narrow.o = o;
+  {
+    const double reach = a.loop_local_path + o.max_translation;
+    std::vector<int> nearby;
+    for (int i : old_idx)
+      if (planar_distance(*features_[static_cast<std::size_t>(i)].feature, here) <= reach) nearby.push_back(i);
+    if (nearby.empty()) return;
+    ++stats_.loop_attempts;
+    search(narrow, nearby);
+  }
+  // The second search (association.loop_wide_drift_per_metre): when the
+  // first placed nothing, a window as wide as a nearby old feature can have
+  // drifted at the measured rate since the robot last saw it, each pair held
+  // to that rate too. A robot anchored to one pass of the old map that comes
+  // back to another pass, which drifted from it, needs that motion (README,
+  // "Why the remaining runs miss their loops": 435 of 810 searches).
+  Search wide;
+  if (a.loop_wide_drift_per_metre > 0.0 && !narrow.match.accepted &&
+      narrow.match.reason.rfind("ambiguous", 0) != 0) {
+    // Headings drift in the same proportion to the stated bounds (loop_drift_deg_per_metre).
+    const double rate = a.loop_wide_drift_per_metre;
+    wide.o = o;
+    wide.o.drift_per_metre = rate;
+    wide.o.drift_rad_per_metre =
+        a.loop_drift_per_metre > 0.0 ? rate * drift_rad_per_metre / a.loop_drift_per_metre : 0.0;
+    std::vector<int> nearby;
+    for (int i : old_idx) {
+      const MapFeature& mf = features_[static_cast<std::size_t>(i)];
+      const double travel = travel_unseen(mf);
+      const double feature_reach = std::min(kMaxWindowTranslation, o.pair_base_translation + rate * travel);
+      if (planar_distance(*mf.feature, here) > a.loop_local_path + std::max(feature_reach, o.max_translation)) continue;
+      nearby.push_back(i);
+      wide.o.max_translation = std::max(wide.o.max_translation, feature_reach);
+      const double turn = std::min(kMaxWindowRotation, o.pair_base_rotation + wide.o.drift_rad_per_metre * travel);
+      wide.o.max_rotation = std::max(wide.o.max_rotation, turn);
+    }
+    if (wide.o.max_translation > o.max_translation + o.cell) {
+      ++stats_.loop_wide_searches;
+      if (log_->enabled(LogLevel::Debug))
+        log_->debug("step ", step_, ": map matching in the window ", o.max_translation, " m: ", narrow.match.reason,
+                    ground_truth_verdict(narrow.match, local, narrow.old, data), "; searching again in ",
+                    wide.o.max_translation, " m, ", wide.o.max_rotation * 180.0 / std::numbers::pi, " deg");
+      wide.wide = true;
+      search(wide, nearby);
     }
   }
-  const MapMatch match = match_local_map(local, old, here, o);
+  // The wider search speaks only when it placed the local map: its refusals
+  // (a rival farther out, too few pairs) say nothing against what the first
+  // search found or keeps waiting.
+  const Search& chosen = wide.wide && wide.match.accepted ? wide : narrow;
+  o = chosen.o;
+  const std::vector<FeatureShape>& old = chosen.old;
+  const ScanPlacement& scans = chosen.scans;
+  const MapMatch& match = chosen.match;
   // Whether placement h agrees with the waiting one p: the robot's position
   // and heading under both within 3σ of their difference (plus the local
   // map's own distortion, floor_sigma); `moved`, `turned`: how far apart.
@@ -694,6 +765,7 @@ void Slam::close_loops(const DataStep& data) {
          << span << " m of travel ago; correction " << T.t.norm() << " m, " << T.theta * 180.0 / std::numbers::pi
          << " deg (about the robot; best other placement pairs " << match.rival_matches << ")";
     if (match.best.seeded) what << "; placed by the scans (score " << match.best.dense_score << ")";
+    if (chosen.wide) what << "; in the wider window (" << o.max_translation << " m)";
     log_->info(what.str());
   }
   if (log_->enabled(LogLevel::Debug)) {
@@ -711,6 +783,7 @@ void Slam::close_loops(const DataStep& data) {
   }
   ++stats_.loop_closures;
   if (match.best.seeded) ++stats_.loop_scan_placed;
+  if (chosen.wide) ++stats_.loop_wide_closures;
   stats_.loop_merged += static_cast<std::int64_t>(match.best.pairs.size());
   {
     std::vector<double> seen;

@@ -292,6 +292,22 @@ TEST(Config, AssociationMethodAndIndexKeys) {
   EXPECT_EQ(again.association.index_cell_size, 2.5);
 }
 
+// The wider second search is reckoned from the travel since each old feature
+// was last seen, which only loop_revisit_window keeps: asked for without it,
+// the key is named (not silently ignored).
+TEST(Config, TheWideLoopWindowNeedsTheRevisitWindow) {
+  EXPECT_EQ(config_error(kBase + "association:\n  loop_closing: true\n  loop_wide_drift_per_metre: 0.025\n"),
+            "test.yaml:23:30: association.loop_wide_drift_per_metre: needs loop_revisit_window: true (the wider "
+            "window is reckoned from the travel since each old feature was last seen)");
+  EXPECT_EQ(config_error(kBase + "association:\n  loop_wide_drift_per_metre: 2\n"),
+            "test.yaml:22:30: association.loop_wide_drift_per_metre: 2 is out of range [0, 1]");
+  const RunConfig c = parse(kBase + "association:\n  loop_closing: true\n  loop_revisit_window: true\n"
+                                    "  loop_wide_drift_per_metre: 0.025\n");
+  EXPECT_EQ(c.association.loop_wide_drift_per_metre, 0.025);
+  EXPECT_EQ(parse(mspace::kernel::effective_config_yaml(c)).association.loop_wide_drift_per_metre, 0.025);
+  EXPECT_EQ(parse(kBase).association.loop_wide_drift_per_metre, 0.0);  // off by default
+}
+
 TEST(Config, EnvironmentVariablesAreExpandedInStrings) {
   ASSERT_EQ(setenv("MSPACE_TEST_DATA", "/mnt/data", 1), 0);
   unsetenv("MSPACE_TEST_UNSET_VAR");
