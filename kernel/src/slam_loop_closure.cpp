@@ -651,6 +651,9 @@ void Slam::close_loops(const DataStep& data) {
                     wide.o.max_translation, " m, ", wide.o.max_rotation * 180.0 / std::numbers::pi, " deg");
       wide.wide = true;
       search(wide, nearby);
+      if (!wide.match.accepted && log_->enabled(LogLevel::Debug))
+        log_->debug("step ", step_, ": map matching in the wider window (", nearby.size(), " old features): ",
+                    wide.match.reason, ground_truth_verdict(wide.match, local, wide.old, data));
     }
   }
   // The wider search speaks only when it placed the local map: its refusals
