@@ -473,6 +473,15 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
         }
       }
     }
+    if (options.probe && std::lround(options.probe->theta / o.rotation_step) == k) {
+      const int pi = static_cast<int>(std::lround(options.probe->t.x() / o.cell)) + half;
+      const int pj = static_cast<int>(std::lround(options.probe->t.y() / o.cell)) + half;
+      for (int di = -1; di <= 1; ++di)
+        for (int dj = -1; dj <= 1; ++dj)
+          if (pi + di >= 0 && pj + dj >= 0 && pi + di < side && pj + dj < side)
+            result.probe_votes =
+                std::max(result.probe_votes, votes[static_cast<std::size_t>((pi + di) * side + pj + dj)]);
+    }
     for (int i = 0; i < side; ++i)
       for (int j = 0; j < side; ++j) {
         const int c = votes[static_cast<std::size_t>(i * side + j)];
@@ -488,6 +497,9 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
         if (is_max) peaks.push_back({c, theta, Eigen::Vector2d((i - half) * o.cell, (j - half) * o.cell)});
       }
   }
+  if (result.probe_votes >= 0)
+    result.probe_outvoted = static_cast<int>(
+        std::count_if(peaks.begin(), peaks.end(), [&](const Peak& p) { return p.votes > result.probe_votes; }));
   // Most votes first; among equals (a ridge along a corridor) the smallest
   // motion, which the prior favours.
   std::stable_sort(peaks.begin(), peaks.end(), [](const Peak& a, const Peak& b) {
@@ -726,25 +738,33 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
       rival_turned = angle_apart(h.motion.theta, result.best.motion.theta) * 180.0 / std::numbers::pi;
     }
   }
+  // Why hypothesis b is not acceptable by itself ("" when it is), rivals
+  // aside; `best` words it for the best one (the search's reason).
+  const auto refusal = [&](const MapMatchHypothesis& b, bool best) -> std::string {
+    if (valid(b)) return "";
+    const std::string pairing = best ? "best pairing" : "pairing";
+    const int wanted = b.seeded ? options.seeded_min_matches : needed;
+    if (static_cast<int>(b.pairs.size()) < wanted)
+      return std::string(best ? "best hypothesis" : "hypothesis") + " pairs only " + std::to_string(b.pairs.size()) +
+             " of " + std::to_string(local.size()) + " features (" + std::to_string(wanted) + " needed)";
+    if (!b.jointly_compatible)
+      return pairing + " is not jointly compatible (D² " + std::to_string(b.d2) + ", " + std::to_string(b.dof) +
+             " dof)";
+    if (!uncontradicted(b))
+      return "the other evidence contradicts the " + pairing + " (score " + std::to_string(b.dense_score) +
+             ", at least " + std::to_string(options.dense_floor) + " needed)";
+    if (!in_window(b))
+      return std::string(best ? "the best placement (" : "the placement (") + std::to_string(b.motion.t.norm()) +
+             " m, " + std::to_string(b.motion.theta * 180.0 / std::numbers::pi) +
+             " deg) lies outside the window, or moves an old feature further than the odometry can have drifted "
+             "since it was last seen";
+    return pairing + " does not fix the motion (σ " + std::to_string(b.sigma_translation) + " m, " +
+           std::to_string(b.sigma_rotation * 180.0 / std::numbers::pi) + " deg)";
+  };
+  if (options.keep_verified)
+    for (const MapMatchHypothesis& h : verified) result.verified.emplace_back(h, refusal(h, false));
   if (!valid(result.best)) {
-    const MapMatchHypothesis& b = result.best;
-    if (static_cast<int>(b.pairs.size()) < needed)
-      result.reason = "best hypothesis pairs only " + std::to_string(b.pairs.size()) + " of " +
-                      std::to_string(local.size()) + " features (" + std::to_string(needed) + " needed)";
-    else if (!b.jointly_compatible)
-      result.reason = "best pairing is not jointly compatible (D² " + std::to_string(b.d2) + ", " +
-                      std::to_string(b.dof) + " dof)";
-    else if (!uncontradicted(b))
-      result.reason = "the other evidence contradicts the best pairing (score " + std::to_string(b.dense_score) +
-                      ", at least " + std::to_string(options.dense_floor) + " needed)";
-    else if (!in_window(b))
-      result.reason = "the best placement (" + std::to_string(b.motion.t.norm()) + " m, " +
-                      std::to_string(b.motion.theta * 180.0 / std::numbers::pi) +
-                      " deg) lies outside the window, or moves an old feature further than the odometry can have "
-                      "drifted since it was last seen";
-    else
-      result.reason = "best pairing does not fix the motion (σ " + std::to_string(b.sigma_translation) + " m, " +
-                      std::to_string(b.sigma_rotation * 180.0 / std::numbers::pi) + " deg)";
+    result.reason = refusal(result.best, true);
     if (!seed_fate.empty()) result.reason += "; the other evidence's placement dropped: " + seed_fate;
     return result;
   }
@@ -773,6 +793,18 @@ std::optional<double> distance_apart(const FeatureShape& a, const PlanarMotion& 
   CoincidenceResidual r;
   if (!coincidence_residual(move(a, a_motion), move(b, b_motion), PlanarMotion{}, 0.0, r)) return std::nullopt;
   return r.r.lpNorm<Eigen::Infinity>();
+}
+
+bool footprints_overlap(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
+                        const PlanarMotion& b_motion, double margin) {
+  if (a.layout == nullptr || b.layout == nullptr) return false;
+  const auto moved = [](const FeatureShape& f, const PlanarMotion& T) {
+    FeatureShape m = f;
+    m.x = T.apply(*f.layout, f.x);
+    return footprint(m);
+  };
+  const Footprint fa = moved(a, a_motion), fb = moved(b, b_motion);
+  return fa.placed && fb.placed && (fa.centre - fb.centre).norm() <= fa.radius + fb.radius + margin;
 }
 
 MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,

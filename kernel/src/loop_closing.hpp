@@ -108,6 +108,15 @@ bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const Pl
 std::optional<double> distance_apart(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
                                      const PlanarMotion& b_motion);
 
+/// Whether two shapes, each moved by its own motion, lie in one place: their
+/// footprints (the discs about the mean of their point blocks that hold those
+/// blocks) no further apart than `margin`; false when either has no point
+/// block. With distance_apart, for ground-truth checks: a wall and another
+/// segment far along its line are the same line (distance 0), not the same
+/// object.
+bool footprints_overlap(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
+                        const PlanarMotion& b_motion, double margin);
+
 struct MapMatchOptions {
   double max_translation = 10.0;    ///< m: the search window's radius about the current estimate
   double max_rotation = 0.5;        ///< rad: ± this about the current estimate
@@ -176,6 +185,12 @@ struct MapMatchOptions {
   /// the drift since it was last anchored (Slam::close_loops).
   double pair_base_translation = 0.0;
   double pair_base_rotation = 0.0;
+  /// Diagnostics (the debug log's ground-truth verdicts): MapMatch::verified
+  /// then holds every verified hypothesis with why it was not acceptable.
+  bool keep_verified = false;
+  /// Diagnostics: the votes the transform gave the cell of this motion
+  /// (MapMatch::probe_votes), e.g. the one the ground truth needs.
+  std::optional<PlanarMotion> probe;
 };
 
 /// One verified hypothesis.
@@ -202,6 +217,13 @@ struct MapMatch {
   int rival_matches = 0;  ///< matches of the best clearly different hypothesis
   int hypotheses = 0;     ///< grid peaks verified
   std::string reason;     ///< why nothing was accepted
+  /// With MapMatchOptions::keep_verified: every verified hypothesis, and for
+  /// each why it is not acceptable by itself ("" when it is).
+  std::vector<std::pair<MapMatchHypothesis, std::string>> verified;
+  /// With MapMatchOptions::probe: the votes at the probe's cell and angle
+  /// (the most within one cell), and how many peaks of the transform had more.
+  int probe_votes = -1;
+  int probe_outvoted = -1;
 };
 
 /// Searches the motion that lays `local` onto `old` (rotations about `pivot`,

@@ -330,8 +330,9 @@ class Slam {
   /// the true one, G = gt ∘ est⁻¹ there; nothing without ground truth at that record.
   std::optional<PlanarMotion> estimate_to_truth_at(double path) const;
   /// How many of the local features are, by the ground truth, an old feature of the search's window (the same
-  /// object: residual ≤ 0.3 m in the true frame — a local feature taken there through the current pose, an old
-  /// one through the pose that last saw it), and how many could be checked: whether a failed search had
+  /// object: residual ≤ 0.3 m in the true frame and footprints overlapping there, so that a segment far along
+  /// the same line is not one — a local feature taken there through the current pose, an old one through the
+  /// pose that last saw it), and how many could be checked: whether a failed search had
   /// anything to find (the debug log).
   /// With each counterpart found, the motion about the robot that would lay that local feature onto its old
   /// one in the estimate (θ, Δx, Δy of the robot): what a right placement must be, and — where the counterparts

@@ -249,7 +249,7 @@ std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<
       const auto d = distance_apart(a, local_to_truth, old[j], *old_to_truth[j]);
       if (!d) continue;
       any = true;
-      if (*d <= 0.3) counterpart = j;
+      if (*d <= 0.3 && footprints_overlap(a, local_to_truth, old[j], *old_to_truth[j], 0.3)) counterpart = j;
     }
     c.checked += any ? 1 : 0;
     if (!counterpart) continue;
@@ -268,6 +268,20 @@ std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<
   return c;
 }
 
+namespace {
+/// The component-wise median of the motions the true counterparts need (θ, t_x, t_y).
+Eigen::Vector3d median_need(const std::vector<Eigen::Vector3d>& needed) {
+  Eigen::Vector3d median;
+  for (int k = 0; k < 3; ++k) {
+    std::vector<double> v;
+    for (const Eigen::Vector3d& n : needed) v.push_back(n[k]);
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    median[k] = v[v.size() / 2];
+  }
+  return median;
+}
+}  // namespace
+
 std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<FeatureShape>& local,
                                       const std::vector<FeatureShape>& old, const DataStep& data) const {
   std::ostringstream out;
@@ -276,13 +290,7 @@ std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<
     out << " (ground truth: " << c->found << " of " << c->checked << " local features are old ones of the window";
     if (!c->needed.empty()) {
       // The component-wise median, and how far the counterparts' own motions lie from it.
-      Eigen::Vector3d median;
-      for (int k = 0; k < 3; ++k) {
-        std::vector<double> v;
-        for (const Eigen::Vector3d& n : c->needed) v.push_back(n[k]);
-        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-        median[k] = v[v.size() / 2];
-      }
+      const Eigen::Vector3d median = median_need(c->needed);
       double spread = 0.0;
       for (const Eigen::Vector3d& n : c->needed) spread = std::max(spread, (n.tail<2>() - median.tail<2>()).norm());
       out << "; laying them on it needs " << median.tail<2>().norm() << " m, " << median[0] * 180.0 / std::numbers::pi
@@ -290,6 +298,9 @@ std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<
     }
     out << ")";
   }
+  if (match.probe_votes >= 0)
+    out << " (ground truth: the transform gave that motion " << match.probe_votes << " votes, " << match.probe_outvoted
+        << " of its peaks more)";
   if (match.best.pairs.empty()) return out.str();
   std::vector<double> seen;
   for (const auto& [li, oi] : match.best.pairs)
@@ -300,6 +311,29 @@ std::string Slam::ground_truth_verdict(const MapMatch& match, const std::vector<
   out << " (ground truth: the best placement is " << best->first << " m, " << best->second * 180.0 / std::numbers::pi
       << " deg off; the estimate without it " << now->first << " m, " << now->second * 180.0 / std::numbers::pi
       << " deg)";
+  // The verified hypothesis nearest the truth, and what kept it out.
+  const MapMatchHypothesis* nearest = nullptr;
+  const std::string* why = nullptr;
+  std::pair<double, double> nearest_off{INFINITY, 0.0};
+  std::size_t rank = 0;
+  for (std::size_t k = 0; k < match.verified.size(); ++k) {
+    const auto& [h, refused] = match.verified[k];
+    std::vector<double> paths;
+    for (const auto& [li, oi] : h.pairs)
+      paths.push_back(features_[static_cast<std::size_t>(old[static_cast<std::size_t>(oi)].feature)].created_path);
+    const auto off = disagreement_with_ground_truth(h.motion, paths, data);
+    if (off && off->first < nearest_off.first) {
+      nearest = &h;
+      why = &refused;
+      nearest_off = *off;
+      rank = k;
+    }
+  }
+  if (nearest != nullptr)
+    out << " (ground truth: of " << match.verified.size() << " verified hypotheses the nearest, #" << rank + 1
+        << ", is " << nearest_off.first << " m, " << nearest_off.second * 180.0 / std::numbers::pi << " deg off, "
+        << nearest->pairs.size() << " pairs" << (nearest->seeded ? ", seeded" : "") << ", dense score "
+        << nearest->dense_score << ": " << (why->empty() ? "acceptable" : *why) << ")";
   return out.str();
 }
 
@@ -581,6 +615,15 @@ void Slam::close_loops(const DataStep& data) {
   };
   const auto search = [&](Search& s, const std::vector<int>& nearby) {
     MapMatchOptions& so = s.o;
+    so.keep_verified = !ground_truth_.empty() && log_->enabled(LogLevel::Debug);
+    if (so.keep_verified) {
+      std::vector<FeatureShape> old_shapes;
+      for (int i : nearby) old_shapes.push_back(estimated_shape(i));
+      if (const auto c = true_counterparts(local, old_shapes, data); c && !c->needed.empty()) {
+        const Eigen::Vector3d need = median_need(c->needed);
+        so.probe = PlanarMotion{need[0], need.tail<2>(), here};
+      }
+    }
     for (int i : nearby) {
       FeatureShape shape = estimated_shape(i);
       if (a.loop_revisit_window) shape.travel_unseen = travel_unseen(features_[static_cast<std::size_t>(i)]);

@@ -412,6 +412,15 @@ TEST(MapMatching, TheTruthCheckSeesObjectsNotTheMapsDistortion) {
   EXPECT_NEAR(*other, 2.0, 1e-9);
   const FeatureShape slid = segment({0, 0}, {4, 0}, true, false);
   EXPECT_LT(*distance_apart(wall, identity, slid, identity), 1e-9);
+  // The same line is not the same object: with neither end measured, a
+  // segment 40 m further along the corridor wall has distance 0 but lies
+  // elsewhere (footprints_overlap).
+  const FeatureShape line = segment({0, 0}, {6, 0}, false, false);
+  const FeatureShape far_along = segment({40, 0}, {46, 0}, false, false);
+  EXPECT_LT(*distance_apart(line, identity, far_along, identity), 1e-9);
+  EXPECT_FALSE(footprints_overlap(line, identity, far_along, identity, 0.3));
+  EXPECT_TRUE(footprints_overlap(wall, identity, slid, identity, 0.3));
+  EXPECT_TRUE(footprints_overlap(wall, identity, drifted, inverse(drift), 0.3));
 }
 
 }  // namespace
