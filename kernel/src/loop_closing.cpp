@@ -753,11 +753,32 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
     if (!uncontradicted(b))
       return "the other evidence contradicts the " + pairing + " (score " + std::to_string(b.dense_score) +
              ", at least " + std::to_string(options.dense_floor) + " needed)";
-    if (!in_window(b))
-      return std::string(best ? "the best placement (" : "the placement (") + std::to_string(b.motion.t.norm()) +
-             " m, " + std::to_string(b.motion.theta * 180.0 / std::numbers::pi) +
-             " deg) lies outside the window, or moves an old feature further than the odometry can have drifted "
-             "since it was last seen";
+    if (!in_window(b)) {
+      std::string what = std::string(best ? "the best placement (" : "the placement (") +
+                         std::to_string(b.motion.t.norm()) + " m, " +
+                         std::to_string(b.motion.theta * 180.0 / std::numbers::pi) +
+                         " deg) lies outside the window, or moves an old feature further than the odometry can have "
+                         "drifted since it was last seen";
+      // Which of the two: the window, or how many pairs lie beyond their reach (and the nearest-seen of them).
+      if (std::abs(b.motion.theta) > options.max_rotation + o.rotation_step ||
+          b.motion.t.norm() > options.max_translation + o.cell)
+        return what + " (the window: " + std::to_string(options.max_translation) + " m, " +
+               std::to_string(options.max_rotation * 180.0 / std::numbers::pi) + " deg)";
+      int beyond = 0;
+      std::size_t tightest = old.size();
+      for (const auto& [li, oi] : b.pairs) {
+        const auto j = static_cast<std::size_t>(oi);
+        if (within_reach(j, b.motion)) continue;
+        ++beyond;
+        if (tightest == old.size() || reach_t[j] < reach_t[tightest]) tightest = j;
+      }
+      if (tightest < old.size())
+        what += " (" + std::to_string(beyond) + " of its " + std::to_string(b.pairs.size()) +
+                " pairs beyond their reach; the tightest: an old feature unseen for " +
+                std::to_string(old[tightest].travel_unseen) + " m of travel, reach " + std::to_string(reach_t[tightest]) +
+                " m, " + std::to_string(reach_r[tightest] * 180.0 / std::numbers::pi) + " deg)";
+      return what;
+    }
     return pairing + " does not fix the motion (σ " + std::to_string(b.sigma_translation) + " m, " +
            std::to_string(b.sigma_rotation * 180.0 / std::numbers::pi) + " deg)";
   };
