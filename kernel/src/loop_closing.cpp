@@ -801,30 +801,30 @@ MapMatch search(const std::vector<FeatureShape>& local, const std::vector<Featur
 
 }  // namespace
 
+namespace {
+/// A shape moved by T: its points, and its sliding directions turned with it (no covariance: a truth check).
+FeatureShape moved_shape(const FeatureShape& f, const PlanarMotion& T) {
+  FeatureShape m = f;
+  m.x = T.apply(*f.layout, f.x);
+  if (f.free.cols() > 0) m.free = T.rotate(*f.layout, f.free);
+  m.cov.resize(0, 0);
+  return m;
+}
+}  // namespace
+
 std::optional<double> distance_apart(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
                                      const PlanarMotion& b_motion) {
   if (a.layout == nullptr || b.layout == nullptr) return std::nullopt;
-  const auto move = [](const FeatureShape& f, const PlanarMotion& T) {
-    FeatureShape m = f;
-    m.x = T.apply(*f.layout, f.x);
-    if (f.free.cols() > 0) m.free = T.rotate(*f.layout, f.free);
-    m.cov.resize(0, 0);
-    return m;
-  };
   CoincidenceResidual r;
-  if (!coincidence_residual(move(a, a_motion), move(b, b_motion), PlanarMotion{}, 0.0, r)) return std::nullopt;
+  if (!coincidence_residual(moved_shape(a, a_motion), moved_shape(b, b_motion), PlanarMotion{}, 0.0, r))
+    return std::nullopt;
   return r.r.lpNorm<Eigen::Infinity>();
 }
 
 bool footprints_overlap(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
                         const PlanarMotion& b_motion, double margin) {
   if (a.layout == nullptr || b.layout == nullptr) return false;
-  const auto moved = [](const FeatureShape& f, const PlanarMotion& T) {
-    FeatureShape m = f;
-    m.x = T.apply(*f.layout, f.x);
-    return footprint(m);
-  };
-  const Footprint fa = moved(a, a_motion), fb = moved(b, b_motion);
+  const Footprint fa = footprint(moved_shape(a, a_motion)), fb = footprint(moved_shape(b, b_motion));
   return fa.placed && fb.placed && (fa.centre - fb.centre).norm() <= fa.radius + fb.radius + margin;
 }
 

@@ -111,9 +111,8 @@ std::optional<double> distance_apart(const FeatureShape& a, const PlanarMotion& 
 /// Whether two shapes, each moved by its own motion, lie in one place: their
 /// footprints (the discs about the mean of their point blocks that hold those
 /// blocks) no further apart than `margin`; false when either has no point
-/// block. With distance_apart, for ground-truth checks: a wall and another
-/// segment far along its line are the same line (distance 0), not the same
-/// object.
+/// block. With distance_apart, for ground-truth checks: two segments far
+/// apart on one line are the same line (distance 0), not the same object.
 bool footprints_overlap(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
                         const PlanarMotion& b_motion, double margin);
 
