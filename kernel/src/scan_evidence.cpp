@@ -229,7 +229,34 @@ ScanPlacement ScanField::search(const std::vector<Eigen::Vector2d>& points, cons
       out.rival = l.motion;
     }
   }
-  if (cut) out.rival_score = std::max(out.rival_score, out.score);  // not searched to the end: not unique
+  if (cut) {
+    out.rival_score = std::max(out.rival_score, out.score);  // not searched to the end: not unique
+    return out;
+  }
+  // Do the placements as good as the rivals lie on one line through the best,
+  // at its heading? Then the scans fix the heading and the position across
+  // that line, and only the slide along it is ambiguous.
+  if (out.rival_score > 0.0) {
+    const auto apart = [&](const Leaf& l) { return l.motion.t - out.best.t; };
+    const Leaf* farthest = nullptr;
+    for (const Leaf& l : leaves)
+      if (l.score >= o.rival_ratio * out.score && (!farthest || apart(l).norm() > apart(*farthest).norm())) farthest = &l;
+    if (farthest && apart(*farthest).norm() > o.distinct_translation) {
+      const Eigen::Vector2d u = apart(*farthest).normalized(), across(-u.y(), u.x());
+      bool on_line = true;
+      double extent = 0.0;
+      for (const Leaf& l : leaves) {
+        if (l.score < o.rival_ratio * out.score) continue;
+        on_line = on_line && std::abs(across.dot(apart(l))) <= o.slide_width &&
+                  std::abs(std::remainder(l.motion.theta - out.best.theta, 2.0 * std::numbers::pi)) <= o.distinct_rotation;
+        extent = std::max(extent, std::abs(u.dot(apart(l))));
+      }
+      if (on_line) {
+        out.slide = u;
+        out.slide_extent = extent;
+      }
+    }
+  }
   return out;
 }
 

@@ -63,6 +63,10 @@ struct ScanSearchOptions {
   /// A rival lies at least this far from the best (m), or is turned this much (rad).
   double distinct_translation = 1.0;
   double distinct_rotation = 0.0873;
+  /// Placements that slide along one line: every placement scoring at least
+  /// rival_ratio × the best within this distance of the line through the
+  /// best (m) and within distinct_rotation of its heading (ScanPlacement::slide).
+  double slide_width = 0.45;
 };
 
 struct ScanPlacement {
@@ -71,6 +75,12 @@ struct ScanPlacement {
   double score = 0.0;        ///< mean field value under the recent end points, [0, 1]
   PlanarMotion rival;        ///< the best placement clearly different from `best`
   double rival_score = 0.0;  ///< 0 when none scores rival_ratio × score
+  /// When the rivals differ from the best only by a slide along one line (a
+  /// corridor whose ends the scans did not see): its direction (unit, map
+  /// frame) and how far along it the placements as good reach either way (m).
+  /// Zero when there is no rival or a rival lies off that line.
+  Eigen::Vector2d slide = Eigen::Vector2d::Zero();
+  double slide_extent = 0.0;
   int leaves = 0;            ///< placements scored one by one (the search's cost)
 };
 

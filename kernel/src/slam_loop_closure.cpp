@@ -419,6 +419,25 @@ void Slam::log_scan_placement(const ScanPlacement& scans, std::size_t points, co
        << scans.best.theta * 180.0 / std::numbers::pi << " deg), score " << scans.score
        << ", best clearly different placement " << scans.rival_score << " (" << scans.leaves << " placements scored)";
   if (truth) what << "; ground truth: " << truth->first << " m, " << truth->second * 180.0 / std::numbers::pi << " deg off";
+  if (scans.slide.squaredNorm() > 0.0) {
+    what << "; the placements as good slide along (" << scans.slide.x() << ", " << scans.slide.y() << ") over "
+         << scans.slide_extent << " m";
+    // The point of that line nearest the truth (searched 1 m beyond the slide's extent either way).
+    std::optional<std::pair<double, double>> nearest;
+    double at = 0.0;
+    for (double along = -scans.slide_extent - 1.0; along <= scans.slide_extent + 1.0; along += 0.1) {
+      PlanarMotion slid = scans.best;
+      slid.t += along * scans.slide;
+      const auto off = disagreement_with_ground_truth(slid, seen, data);
+      if (off && (!nearest || off->first < nearest->first)) {
+        nearest = off;
+        at = along;
+      }
+    }
+    if (nearest)
+      what << " (ground truth: the line passes " << nearest->first << " m, " << nearest->second * 180.0 / std::numbers::pi
+           << " deg off, " << at << " m along)";
+  }
   // Against the old scans taken within 2 m of where the placement puts
   // the robot: the old map may hold several passes that disagree.
   const Eigen::Vector2d placed = scans.best.apply(here);

@@ -124,6 +124,75 @@ TEST(ScanEvidence, ARepeatingCorridorHasARivalAsGoodAsTheBest) {
   EXPECT_GT((sp.rival.t - sp.best.t).norm(), 3.5);  // a door spacing away
 }
 
+TEST(ScanEvidence, ACorridorsRivalsSlideAlongItAndTheHeadingAndCrossingAreFixed) {
+  // The corridor above: every placement as good lies on the line along it,
+  // at the best one's heading — the scans fix the heading and the position
+  // across the corridor (the local scans were moved 0.3 m along it only).
+  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> walls;
+  for (int d = 0; d < 10; ++d) {
+    walls.push_back({{4.0 * d, 0}, {4.0 * d + 3.0, 0}});
+    walls.push_back({{4.0 * d, 2}, {4.0 * d + 3.0, 2}});
+  }
+  std::vector<ScanRay> old;
+  for (double x = 1.0; x < 40.0; x += 1.0)
+    for (const ScanRay& r : rays_to({x, 1}, walls))
+      if ((r.to - r.from).norm() < 8.0) old.push_back(r);
+  const ScanField field(old, 0.1, 0.15, 0.5);
+  std::vector<Eigen::Vector2d> local;
+  for (const ScanRay& r : rays_to({18.5, 1}, walls))
+    if ((r.to - r.from).norm() < 6.0) local.push_back(r.to + Eigen::Vector2d(0.3, -0.4));
+  ScanSearchOptions o;
+  o.max_translation = 6.0;
+  o.max_rotation = 3.0 * kDeg;
+  o.rival_ratio = 0.9;
+  const ScanPlacement sp = field.search(local, {18.5, 1}, o);
+  ASSERT_TRUE(sp.found);
+  ASSERT_GE(sp.rival_score, 0.9 * sp.score);
+  EXPECT_NEAR(std::abs(sp.slide.x()), 1.0, 1e-3);
+  EXPECT_GE(sp.slide_extent, 3.5);               // a door spacing, at least
+  EXPECT_NEAR(sp.best.t.y(), 0.4, 0.1);          // across: the 0.4 m it was moved
+  EXPECT_LE(std::abs(sp.best.theta), 1.0 * kDeg);
+}
+
+TEST(ScanEvidence, RivalsOffTheLineMakeNoSlide) {
+  // Pillars on a 4 m lattice: a placement one spacing along x or along y
+  // fits as well, so no one direction holds the rivals — and the irregular
+  // room has no rival at all.
+  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> walls;
+  for (int i = 0; i < 8; ++i)
+    for (int j = 0; j < 8; ++j) {
+      const Eigen::Vector2d c(4.0 * i, 4.0 * j);
+      walls.push_back({c, c + Eigen::Vector2d(0.6, 0)});
+      walls.push_back({c + Eigen::Vector2d(0.6, 0), c + Eigen::Vector2d(0.6, 0.6)});
+      walls.push_back({c + Eigen::Vector2d(0.6, 0.6), c + Eigen::Vector2d(0, 0.6)});
+      walls.push_back({c + Eigen::Vector2d(0, 0.6), c});
+    }
+  std::vector<ScanRay> old;
+  for (double x = 2.0; x < 30.0; x += 2.0)
+    for (double y = 2.0; y < 30.0; y += 2.0)
+      for (const ScanRay& r : rays_to({x, y}, walls))
+        if ((r.to - r.from).norm() < 5.0) old.push_back(r);
+  const ScanField field(old, 0.1, 0.15, 0.5);
+  std::vector<Eigen::Vector2d> local;
+  for (const ScanRay& r : rays_to({14.0, 14.0}, walls))
+    if ((r.to - r.from).norm() < 5.0) local.push_back(r.to + Eigen::Vector2d(0.2, 0.1));
+  ScanSearchOptions o;
+  o.max_translation = 6.0;
+  o.max_rotation = 2.0 * kDeg;
+  o.rival_ratio = 0.9;
+  const ScanPlacement lattice = field.search(local, {14.0, 14.0}, o);
+  ASSERT_TRUE(lattice.found);
+  ASSERT_GE(lattice.rival_score, 0.9 * lattice.score);
+  EXPECT_EQ(lattice.slide, Eigen::Vector2d::Zero());
+
+  const std::vector<ScanRay> room_old = rays_to({2, 2}, irregular_room());
+  const ScanField room(room_old, 0.1, 0.15, 0.5);
+  const ScanPlacement unique = room.search(ends(rays_to({6, 4}, irregular_room()), 3), {6, 4}, o);
+  ASSERT_TRUE(unique.found);
+  EXPECT_LT(unique.rival_score, 0.9 * unique.score);
+  EXPECT_EQ(unique.slide, Eigen::Vector2d::Zero());
+}
+
 TEST(ScanEvidence, EndPointsWhereTheOldScansSawThroughCostMoreThanUnexplainedOnes) {
   const auto walls = irregular_room();
   const ScanField field(rays_to({2, 2}, walls), 0.1, 0.15, 0.5);
