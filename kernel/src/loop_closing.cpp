@@ -333,6 +333,31 @@ bool coincidence_residual(const FeatureShape& a, const FeatureShape& b, const Pl
   return true;
 }
 
+std::string pair_refusal(const FeatureShape& a, const FeatureShape& b, const PlanarMotion& T,
+                         const MapMatchOptions& o) {
+  std::ostringstream why;
+  why.precision(3);
+  if (a.type != b.type) return "another type";
+  const Footprint fa = footprint(a), fb = footprint(b);
+  const double margin = 3.0 * o.floor_sigma;
+  if (!same_place(a, fa, b, fb, T, margin, 0.0)) {
+    const double apart = (T.apply(fa.centre) - fb.centre).norm();
+    if (apart > fa.radius + fb.radius + margin)
+      why << "footprints apart (centres " << apart << " m, radii " << fa.radius << " + " << fb.radius << " m)";
+    else
+      why << "point blocks arranged otherwise";
+    return why.str();
+  }
+  CoincidenceResidual r;
+  if (!coincidence_residual(a, b, T, o.floor_sigma, r)) return "nothing to compare";
+  const double d2 = r.r.dot(r.S.ldlt().solve(r.r));
+  const double gate = chi2_quantile(o.probability, static_cast<int>(r.r.size()));
+  if (d2 <= gate) return "";
+  why << "D² " << d2 << " > " << gate << " (residual " << r.r.transpose() << ", σ "
+      << r.S.diagonal().cwiseSqrt().transpose() << ")";
+  return why.str();
+}
+
 // ---- The search ---------------------------------------------------------------
 
 namespace {
@@ -826,6 +851,12 @@ bool footprints_overlap(const FeatureShape& a, const PlanarMotion& a_motion, con
   if (a.layout == nullptr || b.layout == nullptr) return false;
   const Footprint fa = footprint(moved_shape(a, a_motion)), fb = footprint(moved_shape(b, b_motion));
   return fa.placed && fb.placed && (fa.centre - fb.centre).norm() <= fa.radius + fb.radius + margin;
+}
+
+bool arranged_alike(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
+                    const PlanarMotion& b_motion, double tolerance) {
+  if (a.layout == nullptr || b.layout == nullptr || a.layout->size() != b.layout->size()) return false;
+  return same_arrangement(moved_shape(a, a_motion), moved_shape(b, b_motion), 0.0, tolerance, 0.0);
 }
 
 MapMatch match_local_map(const std::vector<FeatureShape>& local, const std::vector<FeatureShape>& old,

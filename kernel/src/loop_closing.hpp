@@ -116,6 +116,24 @@ std::optional<double> distance_apart(const FeatureShape& a, const PlanarMotion& 
 bool footprints_overlap(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
                         const PlanarMotion& b_motion, double margin);
 
+/// Whether two shapes, each moved by its own motion, have their point blocks
+/// arranged the same way: every two point blocks pointing the same way, on
+/// one line to `tolerance` (m). For a wall, the same face: the two faces of
+/// a wall 0.2 m thick lie closer than most tolerances but run opposite ways.
+/// For ground-truth checks, with distance_apart and footprints_overlap.
+bool arranged_alike(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
+                    const PlanarMotion& b_motion, double tolerance);
+
+struct MapMatchOptions;
+
+/// Diagnostics (the debug log's ground-truth verdicts): why the search would
+/// not pair local feature `a`, moved by T, with old feature `b` — another
+/// type, not the same place (footprints apart, point blocks the other way
+/// round), nothing to compare, or the residual beyond the pairwise gate —
+/// or "" when it would (before the one-to-one choice and the reach).
+std::string pair_refusal(const FeatureShape& a, const FeatureShape& b, const PlanarMotion& T,
+                         const MapMatchOptions& options);
+
 struct MapMatchOptions {
   double max_translation = 10.0;    ///< m: the search window's radius about the current estimate
   double max_rotation = 0.5;        ///< rad: ± this about the current estimate

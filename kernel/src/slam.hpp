@@ -340,6 +340,7 @@ class Slam {
   struct TrueCounterparts {
     int found = 0, checked = 0;
     std::vector<Eigen::Vector3d> needed;
+    std::vector<std::pair<int, int>> pairs;  ///< (position in local, in old), in the order of `needed`
   };
   std::optional<TrueCounterparts> true_counterparts(const std::vector<FeatureShape>& local,
                                                     const std::vector<FeatureShape>& old, const DataStep& data) const;

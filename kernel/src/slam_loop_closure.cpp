@@ -249,11 +249,14 @@ std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<
       const auto d = distance_apart(a, local_to_truth, old[j], *old_to_truth[j]);
       if (!d) continue;
       any = true;
-      if (*d <= 0.3 && footprints_overlap(a, local_to_truth, old[j], *old_to_truth[j], 0.3)) counterpart = j;
+      if (*d <= 0.3 && footprints_overlap(a, local_to_truth, old[j], *old_to_truth[j], 0.3) &&
+          arranged_alike(a, local_to_truth, old[j], *old_to_truth[j], 0.3))
+        counterpart = j;
     }
     c.checked += any ? 1 : 0;
     if (!counterpart) continue;
     ++c.found;
+    c.pairs.emplace_back(static_cast<int>(&a - local.data()), static_cast<int>(*counterpart));
     // The robot taken to the truth through the current pose, then back into the estimate through the pose that
     // last saw the old feature (G⁻¹: q ↦ R(−θ)(q − pivot − t) + pivot).
     const PlanarMotion& G = *old_to_truth[*counterpart];
@@ -641,6 +644,24 @@ void Slam::close_loops(const DataStep& data) {
       if (const auto c = true_counterparts(local, old_shapes, data); c && !c->needed.empty()) {
         const Eigen::Vector3d need = median_need(c->needed);
         so.probe = PlanarMotion{need[0], need.tail<2>(), here};
+        // Would the search pair the true counterparts at that motion?
+        std::ostringstream why;
+        why.precision(3);
+        int pairable = 0;
+        for (const auto& [li, oi] : c->pairs) {
+          const std::string refusal = pair_refusal(local[static_cast<std::size_t>(li)],
+                                                   old_shapes[static_cast<std::size_t>(oi)], *so.probe, so);
+          if (refusal.empty()) {
+            ++pairable;
+            continue;
+          }
+          why << " #" << features_[static_cast<std::size_t>(local[static_cast<std::size_t>(li)].feature)].id << "->#"
+              << features_[static_cast<std::size_t>(old_shapes[static_cast<std::size_t>(oi)].feature)].id << ": "
+              << refusal << ";";
+        }
+        log_->debug("step ", step_, ": ground truth: at the motion it needs, ", pairable, " of the ", c->pairs.size(),
+                    " true counterpart pairs pass the pairing's tests", pairable < static_cast<int>(c->pairs.size()) ? "; refused:" : "",
+                    why.str());
       }
     }
     for (int i : nearby) {

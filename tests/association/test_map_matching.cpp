@@ -421,6 +421,17 @@ TEST(MapMatching, TheTruthCheckSeesObjectsNotTheMapsDistortion) {
   EXPECT_FALSE(footprints_overlap(line, identity, far_along, identity, 0.3));
   EXPECT_TRUE(footprints_overlap(wall, identity, slid, identity, 0.3));
   EXPECT_TRUE(footprints_overlap(wall, identity, drifted, inverse(drift), 0.3));
+  // The other face of a wall 0.2 m thick: on the same footprint, within the
+  // check's 0.3 m, but its ends run the other way — another object.
+  // (Neither end measured, as a door's side wall seen through it often is.)
+  const FeatureShape other_face = segment({6, 0.2}, {0, 0.2}, false, false);
+  EXPECT_NEAR(*distance_apart(line, identity, other_face, identity), 0.2, 1e-9);
+  EXPECT_TRUE(footprints_overlap(line, identity, other_face, identity, 0.3));
+  EXPECT_FALSE(arranged_alike(line, identity, other_face, identity, 0.3));
+  EXPECT_FALSE(pair_refusal(line, other_face, identity, MapMatchOptions{}).empty());
+  EXPECT_EQ(pair_refusal(line, segment({0.5, 0.02}, {5.5, 0.02}, false, false), identity, MapMatchOptions{}), "");
+  EXPECT_TRUE(arranged_alike(wall, identity, drifted, inverse(drift), 0.3));
+  EXPECT_TRUE(arranged_alike(wall, identity, slid, identity, 0.3));
 }
 
 }  // namespace
