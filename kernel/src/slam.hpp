@@ -341,6 +341,8 @@ class Slam {
     int found = 0, checked = 0;
     std::vector<Eigen::Vector3d> needed;
     std::vector<std::pair<int, int>> pairs;  ///< (position in local, in old), in the order of `needed`
+    /// For each local feature without one: where it lies in the true frame and the nearest old one there.
+    std::string unmatched;
   };
   std::optional<TrueCounterparts> true_counterparts(const std::vector<FeatureShape>& local,
                                                     const std::vector<FeatureShape>& old, const DataStep& data) const;

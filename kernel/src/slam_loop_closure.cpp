@@ -254,7 +254,40 @@ std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<
         counterpart = j;
     }
     c.checked += any ? 1 : 0;
-    if (!counterpart) continue;
+    if (!counterpart) {
+      // The nearest old feature of its type by footprint, in the true frame.
+      std::ostringstream what;
+      what.precision(3);
+      what << " #" << features_[static_cast<std::size_t>(a.feature)].id << " at ("
+           << local_to_truth.apply(*a.layout, a.x).transpose() << ")";
+      double nearest = std::numeric_limits<double>::infinity();
+      std::size_t at = old.size();
+      for (std::size_t j = 0; j < old.size(); ++j) {
+        if (!old_to_truth[j] || old[j].type != a.type) continue;
+        for (double margin : {0.3, 1.0, 3.0})
+          if (footprints_overlap(a, local_to_truth, old[j], *old_to_truth[j], margin)) {
+            const auto d = distance_apart(a, local_to_truth, old[j], *old_to_truth[j]);
+            const double score = margin + (d ? *d : 10.0);
+            if (score < nearest) {
+              nearest = score;
+              at = j;
+            }
+            break;
+          }
+      }
+      if (at < old.size()) {
+        const auto d = distance_apart(a, local_to_truth, old[at], *old_to_truth[at]);
+        what << ": nearest old #" << features_[static_cast<std::size_t>(old[at].feature)].id << " at ("
+             << old_to_truth[at]->apply(*old[at].layout, old[at].x).transpose() << "), " << (d ? *d : -1.0)
+             << " m apart, " << (arranged_alike(a, local_to_truth, old[at], *old_to_truth[at], 0.3) ? "" : "not ")
+             << "the same way round";
+      } else {
+        what << ": no old one within 3 m";
+      }
+      what << ";";
+      c.unmatched += what.str();
+      continue;
+    }
     ++c.found;
     c.pairs.emplace_back(static_cast<int>(&a - local.data()), static_cast<int>(*counterpart));
     // The robot taken to the truth through the current pose, then back into the estimate through the pose that
@@ -641,7 +674,10 @@ void Slam::close_loops(const DataStep& data) {
     if (so.keep_verified) {
       std::vector<FeatureShape> old_shapes;
       for (int i : nearby) old_shapes.push_back(estimated_shape(i));
-      if (const auto c = true_counterparts(local, old_shapes, data); c && !c->needed.empty()) {
+      const auto c = true_counterparts(local, old_shapes, data);
+      if (c && !c->unmatched.empty())
+        log_->debug("step ", step_, ": ground truth: local features without a counterpart:", c->unmatched);
+      if (c && !c->needed.empty()) {
         const Eigen::Vector3d need = median_need(c->needed);
         so.probe = PlanarMotion{need[0], need.tail<2>(), here};
         // Would the search pair the true counterparts at that motion?
