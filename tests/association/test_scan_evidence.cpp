@@ -99,22 +99,39 @@ TEST(ScanEvidence, SearchFindsTheMotionAndEqualsBruteForce) {
   EXPECT_LT(sp.rival_score, 0.9 * sp.score);
 }
 
+/// A corridor 2 m wide with a door every 4 m along both walls, scanned from
+/// every metre along its middle (the old scans' field).
+struct DoorCorridor {
+  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> walls = [] {
+    std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> w;
+    for (int d = 0; d < 10; ++d) {
+      w.push_back({{4.0 * d, 0}, {4.0 * d + 3.0, 0}});
+      w.push_back({{4.0 * d, 2}, {4.0 * d + 3.0, 2}});
+    }
+    return w;
+  }();
+  ScanField field = [this] {
+    std::vector<ScanRay> old;
+    for (double x = 1.0; x < 40.0; x += 1.0)
+      for (const ScanRay& r : rays_to({x, 1}, walls))
+        if ((r.to - r.from).norm() < 8.0) old.push_back(r);
+    return ScanField(old, 0.1, 0.15, 0.5);
+  }();
+  /// The end points a scan from `where` sees within 6 m, all moved by `offset`.
+  std::vector<Eigen::Vector2d> seen_from(const Eigen::Vector2d& where, const Eigen::Vector2d& offset) const {
+    std::vector<Eigen::Vector2d> out;
+    for (const ScanRay& r : rays_to(where, walls))
+      if ((r.to - r.from).norm() < 6.0) out.push_back(r.to + offset);
+    return out;
+  }
+};
+
 TEST(ScanEvidence, ARepeatingCorridorHasARivalAsGoodAsTheBest) {
   // A corridor with a door every 4 m: shifted by one door spacing the recent
   // scans fit as well; the search must report that rival.
-  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> walls;
-  for (int d = 0; d < 10; ++d) {
-    walls.push_back({{4.0 * d, 0}, {4.0 * d + 3.0, 0}});
-    walls.push_back({{4.0 * d, 2}, {4.0 * d + 3.0, 2}});
-  }
-  std::vector<ScanRay> old;
-  for (double x = 1.0; x < 40.0; x += 1.0)
-    for (const ScanRay& r : rays_to({x, 1}, walls))
-      if ((r.to - r.from).norm() < 8.0) old.push_back(r);
-  const ScanField field(old, 0.1, 0.15, 0.5);
-  std::vector<Eigen::Vector2d> local;
-  for (const ScanRay& r : rays_to({18.5, 1}, walls))
-    if ((r.to - r.from).norm() < 6.0) local.push_back(r.to + Eigen::Vector2d(0.3, 0.0));
+  const DoorCorridor corridor;
+  const ScanField& field = corridor.field;
+  const std::vector<Eigen::Vector2d> local = corridor.seen_from({18.5, 1}, {0.3, 0.0});
   ScanSearchOptions o;
   o.max_translation = 6.0;
   o.max_rotation = 3.0 * kDeg;
@@ -128,19 +145,9 @@ TEST(ScanEvidence, ACorridorsRivalsSlideAlongItAndTheHeadingAndCrossingAreFixed)
   // The corridor above: every placement as good lies on the line along it,
   // at the best one's heading — the scans fix the heading and the position
   // across the corridor (the local scans were moved 0.3 m along it only).
-  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> walls;
-  for (int d = 0; d < 10; ++d) {
-    walls.push_back({{4.0 * d, 0}, {4.0 * d + 3.0, 0}});
-    walls.push_back({{4.0 * d, 2}, {4.0 * d + 3.0, 2}});
-  }
-  std::vector<ScanRay> old;
-  for (double x = 1.0; x < 40.0; x += 1.0)
-    for (const ScanRay& r : rays_to({x, 1}, walls))
-      if ((r.to - r.from).norm() < 8.0) old.push_back(r);
-  const ScanField field(old, 0.1, 0.15, 0.5);
-  std::vector<Eigen::Vector2d> local;
-  for (const ScanRay& r : rays_to({18.5, 1}, walls))
-    if ((r.to - r.from).norm() < 6.0) local.push_back(r.to + Eigen::Vector2d(0.3, -0.4));
+  const DoorCorridor corridor;
+  const ScanField& field = corridor.field;
+  const std::vector<Eigen::Vector2d> local = corridor.seen_from({18.5, 1}, {0.3, -0.4});
   ScanSearchOptions o;
   o.max_translation = 6.0;
   o.max_rotation = 3.0 * kDeg;
