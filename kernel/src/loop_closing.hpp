@@ -118,8 +118,9 @@ bool footprints_overlap(const FeatureShape& a, const PlanarMotion& a_motion, con
 
 /// Whether two shapes, each moved by its own motion, have their point blocks
 /// arranged the same way: every two point blocks pointing the same way, on
-/// one line to `tolerance` (m). For a wall, the same face: the two faces of
-/// a wall 0.2 m thick lie closer than most tolerances but run opposite ways.
+/// one line to `tolerance` (m): the same side of an object whose two sides
+/// are features of their own — two parallel sides 0.2 m apart lie closer than
+/// most tolerances but run opposite ways.
 /// For ground-truth checks, with distance_apart and footprints_overlap.
 bool arranged_alike(const FeatureShape& a, const PlanarMotion& a_motion, const FeatureShape& b,
                     const PlanarMotion& b_motion, double tolerance);
