@@ -240,6 +240,40 @@ std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<
   std::vector<std::optional<PlanarMotion>> old_to_truth;
   for (const FeatureShape& b : old)
     old_to_truth.push_back(estimate_to_truth_at(features_[static_cast<std::size_t>(b.feature)].last_seen_path));
+  // For the debug log: where a local feature without a counterpart lies in the true frame, and the old feature
+  // of its type nearest to it there (by footprint, then distance).
+  const auto describe_unmatched = [&](const FeatureShape& a) {
+    std::ostringstream what;
+    what.precision(3);
+    what << " #" << features_[static_cast<std::size_t>(a.feature)].id << " at ("
+         << local_to_truth.apply(*a.layout, a.x).transpose() << ")";
+    double nearest = std::numeric_limits<double>::infinity();
+    std::size_t at = old.size();
+    for (std::size_t j = 0; j < old.size(); ++j) {
+      if (!old_to_truth[j] || old[j].type != a.type) continue;
+      for (double margin : {0.3, 1.0, 3.0})
+        if (footprints_overlap(a, local_to_truth, old[j], *old_to_truth[j], margin)) {
+          const auto d = distance_apart(a, local_to_truth, old[j], *old_to_truth[j]);
+          const double score = margin + (d ? *d : 10.0);
+          if (score < nearest) {
+            nearest = score;
+            at = j;
+          }
+          break;
+        }
+    }
+    if (at < old.size()) {
+      const auto d = distance_apart(a, local_to_truth, old[at], *old_to_truth[at]);
+      what << ": nearest old #" << features_[static_cast<std::size_t>(old[at].feature)].id << " at ("
+           << old_to_truth[at]->apply(*old[at].layout, old[at].x).transpose() << "), " << (d ? *d : -1.0)
+           << " m apart, " << (arranged_alike(a, local_to_truth, old[at], *old_to_truth[at], 0.3) ? "" : "not ")
+           << "the same way round";
+    } else {
+      what << ": no old one within 3 m";
+    }
+    what << ";";
+    return what.str();
+  };
   TrueCounterparts c;
   for (const FeatureShape& a : local) {
     bool any = false;
@@ -255,37 +289,7 @@ std::optional<Slam::TrueCounterparts> Slam::true_counterparts(const std::vector<
     }
     c.checked += any ? 1 : 0;
     if (!counterpart) {
-      // The nearest old feature of its type by footprint, in the true frame.
-      std::ostringstream what;
-      what.precision(3);
-      what << " #" << features_[static_cast<std::size_t>(a.feature)].id << " at ("
-           << local_to_truth.apply(*a.layout, a.x).transpose() << ")";
-      double nearest = std::numeric_limits<double>::infinity();
-      std::size_t at = old.size();
-      for (std::size_t j = 0; j < old.size(); ++j) {
-        if (!old_to_truth[j] || old[j].type != a.type) continue;
-        for (double margin : {0.3, 1.0, 3.0})
-          if (footprints_overlap(a, local_to_truth, old[j], *old_to_truth[j], margin)) {
-            const auto d = distance_apart(a, local_to_truth, old[j], *old_to_truth[j]);
-            const double score = margin + (d ? *d : 10.0);
-            if (score < nearest) {
-              nearest = score;
-              at = j;
-            }
-            break;
-          }
-      }
-      if (at < old.size()) {
-        const auto d = distance_apart(a, local_to_truth, old[at], *old_to_truth[at]);
-        what << ": nearest old #" << features_[static_cast<std::size_t>(old[at].feature)].id << " at ("
-             << old_to_truth[at]->apply(*old[at].layout, old[at].x).transpose() << "), " << (d ? *d : -1.0)
-             << " m apart, " << (arranged_alike(a, local_to_truth, old[at], *old_to_truth[at], 0.3) ? "" : "not ")
-             << "the same way round";
-      } else {
-        what << ": no old one within 3 m";
-      }
-      what << ";";
-      c.unmatched += what.str();
+      c.unmatched += describe_unmatched(a);
       continue;
     }
     ++c.found;
