@@ -44,7 +44,7 @@ const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feat
                                                    "loop_drift_deg_per_metre", "loop_min_matches",
                                                    "loop_ambiguity_ratio", "loop_scans",
                                                    "loop_revisit_window", "loop_confirm_repeats",
-                                                   "loop_wide_drift_per_metre"};
+                                                   "loop_wide_drift_per_metre", "relocalize_by_scans"};
 const std::vector<std::string> kAssociationMethods = {"nearest_neighbour", "jcbb"};
 const std::vector<std::string> kInitialPoseKeys = {"pose", "sigma"};
 const std::vector<std::string> kOutputKeys = {"dir",     "trajectory",   "map",         "summary",
@@ -543,6 +543,7 @@ AssociationConfig Reader::read_association(const Item* item) const {
     association.loop_ambiguity_ratio = number(*f, 0.1, 1.0);
   if (const Item* f = find(fields, "loop_scans")) association.loop_scans = boolean(*f);
   if (const Item* f = find(fields, "loop_revisit_window")) association.loop_revisit_window = boolean(*f);
+  if (const Item* f = find(fields, "relocalize_by_scans")) association.relocalize_by_scans = boolean(*f);
   if (const Item* f = find(fields, "loop_confirm_repeats"))
     association.loop_confirm_repeats = static_cast<int>(integer(*f, 0, 100));
   if (const Item* f = find(fields, "loop_wide_drift_per_metre")) {
@@ -780,6 +781,7 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "loop_confirm_repeats" << YAML::Value << std::to_string(c.association.loop_confirm_repeats);
   out << YAML::Key << "loop_wide_drift_per_metre" << YAML::Value
       << format_number(c.association.loop_wide_drift_per_metre);
+  out << YAML::Key << "relocalize_by_scans" << YAML::Value << yes_no(c.association.relocalize_by_scans);
   out << YAML::EndMap;
 
   if (c.map.search_pose) {

@@ -127,6 +127,11 @@ struct AssociationConfig {
   /// window; a placement the scans contradict is refused, and a unique scan
   /// placement is offered to the features as a hypothesis of its own.
   bool loop_scans = false;
+  /// After a step whose own odometry σ is large (a logging gap), that step's
+  /// range scan is placed on every older one within 3σ of the prediction and
+  /// the pose is updated to where it fits uniquely (slam_loop_closure.cpp,
+  /// Slam::relocalize). Independent of loop_closing.
+  bool relocalize_by_scans = false;
   /// The search window grows with the path since matches with *revisited*
   /// features (seen again after loop_min_gap_path m unseen) fixed the robot,
   /// not since any feature created that long ago did, and each old feature

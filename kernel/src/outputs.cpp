@@ -443,6 +443,18 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     }
     y << YAML::EndMap;
   }
+  if (slam.config().association.relocalize_by_scans) {
+    y << YAML::Key << "relocalization" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "uncertain_steps" << YAML::Value << st.relocalize_steps;
+    y << YAML::Key << "placed" << YAML::Value << st.relocalized;
+    y << YAML::Key << "placed_across_a_corridor" << YAML::Value << st.relocalized_along_a_line;
+    y << YAML::Key << "not_placed" << YAML::Value << st.relocalize_refused;
+    if (st.relocalize_checked > 0) {
+      y << YAML::Key << "checked_against_ground_truth" << YAML::Value << st.relocalize_checked;
+      y << YAML::Key << "wrong" << YAML::Value << st.relocalize_wrong;
+    }
+    y << YAML::EndMap;
+  }
   y << YAML::EndMap;
   y << YAML::Key << "features" << YAML::Value << YAML::BeginMap;
   for (const auto& [type, by_dim] : s.features_by_dim) {
@@ -624,6 +636,14 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
        << " false (worst disagreement " << st.loop_worst_disagreement << " m), " << st.loop_wrong_pairs
        << " pairing wrong objects";
   if (slam.config().association.loop_closing) os << "\n";
+  if (slam.config().association.relocalize_by_scans) {
+    os << "  relocalization by the scans: " << st.relocalize_steps << " uncertain steps, " << st.relocalized
+       << " placed, " << st.relocalized_along_a_line << " placed across a corridor, " << st.relocalize_refused
+       << " not placed";
+    if (st.relocalize_checked > 0)
+      os << "; against the ground truth " << st.relocalize_wrong << " of " << st.relocalize_checked << " wrong";
+    os << "\n";
+  }
   os << "  state dimension " << s.state_dimension << "\n";
   for (const auto& [type, by_dim] : s.features_by_dim) {
     os << "  features '" << type << "':";

@@ -259,7 +259,13 @@ bool Slam::step() {
   robot_truth_ = pose_search_ ? std::nullopt : robot_truth(data, ground_truth_sensor_, dofs_);
   if (problem_ && !data.readings.empty()) problem_->key_pose(trajectory_.size());
   stats_.seconds_predict += seconds_since(t0);
-  if (config_.association.loop_closing && config_.association.loop_scans) keep_scans(data);
+  const AssociationConfig& a = config_.association;
+  if ((a.loop_closing && a.loop_scans) || a.relocalize_by_scans) keep_scans(data);
+  if (a.relocalize_by_scans && !pose_search_ && !localizing()) {
+    t0 = Clock::now();
+    relocalize(data);
+    stats_.seconds_loops += seconds_since(t0);
+  }
 
   std::vector<ReadingWork> work;
   for (const SensorReading& reading : data.readings) process_reading(reading, work);
@@ -324,6 +330,7 @@ void Slam::predict(const DataStep& data) {
   if (!started_) dead_reckoning_pose_ = x_r_;  // the baseline starts where the run starts
   started_ = true;
   t_ = data.t;
+  step_motion_Q_.resize(0, 0);
   if (data.odometry.size() == 0) {
     if (problem_) problem_->motion(data.odometry, dt, trajectory_.size());
     return;
@@ -372,6 +379,7 @@ void Slam::predict(const DataStep& data) {
   path_distance_ += delta.head<3>().norm() + kRotationWeightMetresPerRadian * delta.tail<3>().norm();
   x_r_ = pred.pose;
   const Eigen::MatrixXd Q = pred.J_rd * pred.C_d * pred.J_rd.transpose();  // eq. 26
+  step_motion_Q_ = Q;
   guarded(config_.estimator.instance, *estimator_lib_, "predict", [&] { estimator_->predict(pred.J_rr, Q); });
   if (considered_) considered_->predict(pred.J_rr);
 }

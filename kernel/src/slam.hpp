@@ -122,6 +122,16 @@ struct RunStats {
   /// closure by the pose check above may still pair the right objects: the
   /// old map there was distorted; this counts wrong associations.
   std::int64_t loop_wrong_pairs = 0;
+  /// association.relocalize_by_scans: steps whose odometry said too little
+  /// (with older scans to place them on), placed in full, placed across a
+  /// corridor and in heading only, not placed (no fit, or a rival as good);
+  /// with ground truth, how many were checked and wrong (over 1 m or 5°; along a corridor, the heading only).
+  std::int64_t relocalize_steps = 0;
+  std::int64_t relocalized = 0;
+  std::int64_t relocalized_along_a_line = 0;
+  std::int64_t relocalize_refused = 0;
+  std::int64_t relocalize_checked = 0;
+  std::int64_t relocalize_wrong = 0;
   double seconds_predict = 0.0;
   double seconds_extract = 0.0;  ///< sensors' extractors (per sensor in the health reports)
   double seconds_associate = 0.0;  ///< gating, selection and keeping the spatial index in step
@@ -363,11 +373,31 @@ class Slam {
   /// A seeded closure's pose relation (problem.hpp, relate) from the old pose
   /// node nearest to where T puts the robot to the current one.
   void relate_to_old_pose(const PlanarMotion& T, const MapMatchHypothesis& h);
+  /// The pose relation (problem.hpp, relate) from the pose node nearest to `placed` (x, y, θ in the map frame)
+  /// among those reached by `newest_path` m of travel, to the current one; `C_placed`: the placed pose's
+  /// covariance in the map frame.
+  void relate_to_nearest_node(const Eigen::Vector3d& placed, const Eigen::Matrix3d& C_placed, double newest_path);
   /// Keeps this step's range scans when association.loop_scans is on.
   void keep_scans(const DataStep& data);
   /// The debug line of a scans' placement, with the ground truth's verdict when it is known.
   void log_scan_placement(const ScanPlacement& scans, std::size_t points, const std::vector<FeatureShape>& old,
                           const Eigen::Vector2d& here, const DataStep& data) const;
+  /// A kept scan's pose in the map frame (its record's estimate): rotation, position.
+  std::pair<Eigen::Matrix2d, Eigen::Vector2d> scan_pose(const KeptScan& s) const;
+  /// The end points of the kept scans `take` accepts, in the map frame, one per
+  /// 25 cm cell and at most 300; `radius` receives the farthest one's distance from `here`.
+  std::vector<Eigen::Vector2d> scan_points(const std::function<bool(const KeptScan&)>& take, const Eigen::Vector2d& here,
+                                           double& radius) const;
+  /// The likelihood field (scan_evidence.hpp) of the kept scans from the
+  /// first while `old_enough` holds (they are kept in the order of travel)
+  /// whose end points lie within `reach` of `here`.
+  std::unique_ptr<ScanField> old_scan_field(const Eigen::Vector2d& here, double reach,
+                                            const std::function<bool(const KeptScan&)>& old_enough) const;
+  /// After a step whose odometry says little (association.relocalize_by_scans):
+  /// the scans from that step on, once they hold enough end points, placed on
+  /// every older one within 3σ of the prediction there, and the pose set to
+  /// where they fit uniquely (slam_loop_closure.cpp).
+  void relocalize(const DataStep& data);
   /// The recent scans (the last loop_local_path m) placed on the old ones
   /// (over loop_min_gap_path m ago) within the window `o` about `here`
   /// (scan_evidence.hpp); `field` receives the old scans' field.
@@ -426,6 +456,17 @@ class Slam {
 
   std::vector<int> dofs_;     ///< robot pose coordinates in the state
   std::vector<int> robot_idx_;  ///< 0..k−1
+  Eigen::MatrixXd step_motion_Q_;  ///< this step's prediction noise Q (eq. 26; empty before the first increment)
+  /// association.relocalize_by_scans: gathering the scans from an uncertain step on (Slam::relocalize).
+  struct Relocalizing {
+    bool active = false;
+    std::size_t from_record = 0;  ///< the uncertain step's trajectory index
+    double from_path = 0.0;       ///< m of travel there
+    std::size_t points = 0;       ///< end points gathered by the last step
+    double step_sigma_xy = 0.0, step_sigma_theta = 0.0;  ///< the uncertain step's own odometry σ (m, rad)
+    double sigma_xy = 0.0, sigma_theta = 0.0;  ///< the robot's σ predicted there (m, rad)
+  };
+  Relocalizing relocalizing_;
   Pose6 x_r_ = Pose6::Zero();
   double t_ = 0.0;
   bool started_ = false;

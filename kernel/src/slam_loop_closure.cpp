@@ -447,6 +447,18 @@ constexpr double kScanUniqueRatio = 0.9;
 /// 5 m along a corridor; README, "A second search in a wider window").
 constexpr double kScanWideMinScore = 0.5;
 
+/// Relocalization (association.relocalize_by_scans) follows a step whose own
+/// odometry σ exceeds two cells of the scans' field or two of their rotation
+/// steps: then the scans can tell the pose better than the prediction does.
+constexpr double kRelocalizeStepSigma = 2.0 * kScanResolution;          // m
+constexpr double kRelocalizeStepSigmaRotation = 2.0 * kScanRotationStep;  // rad
+/// Gathered scans with fewer end points (one per 25 cm cell) are not placed.
+constexpr std::size_t kRelocalizeMinPoints = 20;
+/// The placement must explain this much of the gathered end points: the
+/// wider window's floor (kScanWideMinScore), for the same reason — a window
+/// of several metres and tens of degrees holds many places to fit by chance.
+constexpr double kRelocalizeMinScore = kScanWideMinScore;
+
 void Slam::log_scan_placement(const ScanPlacement& scans, std::size_t points, const std::vector<FeatureShape>& old,
                               const Eigen::Vector2d& here, const DataStep& data) const {
   const AssociationConfig& a = config_.association;
@@ -509,45 +521,49 @@ void Slam::keep_scans(const DataStep& data) {
   }
 }
 
-ScanPlacement Slam::place_scans(const Eigen::Vector2d& here, const MapMatchOptions& o,
-                                std::unique_ptr<ScanField>& field, std::vector<Eigen::Vector2d>& local) const {
-  const AssociationConfig& a = config_.association;
-  const auto pose_of = [&](const KeptScan& s) {
-    const Pose6& x = s.record < trajectory_.size() ? trajectory_[s.record].pose : x_r_;
-    const double c = std::cos(x[kTheta]), sn = std::sin(x[kTheta]);
-    Eigen::Matrix2d R;
-    R << c, -sn, sn, c;
-    return std::pair{R, Eigen::Vector2d(x[kX], x[kY])};
-  };
-  local.clear();
+std::pair<Eigen::Matrix2d, Eigen::Vector2d> Slam::scan_pose(const KeptScan& s) const {
+  const Pose6& x = s.record < trajectory_.size() ? trajectory_[s.record].pose : x_r_;
+  const double c = std::cos(x[kTheta]), sn = std::sin(x[kTheta]);
+  Eigen::Matrix2d R;
+  R << c, -sn, sn, c;
+  return {R, Eigen::Vector2d(x[kX], x[kY])};
+}
+
+std::vector<Eigen::Vector2d> Slam::scan_points(const std::function<bool(const KeptScan&)>& take,
+                                               const Eigen::Vector2d& here, double& radius) const {
+  std::vector<Eigen::Vector2d> points;
+  radius = 0.0;
   std::unordered_set<std::int64_t> taken;
-  double local_radius = 0.0;
   for (const KeptScan& s : scans_) {
-    if (s.path < path_distance_ - a.loop_local_path) continue;
-    const auto [R, t] = pose_of(s);
+    if (!take(s)) continue;
+    const auto [R, t] = scan_pose(s);
     for (const Eigen::Vector2f& q : s.points) {
       const Eigen::Vector2d p = R * q.cast<double>() + t;
       const auto ix = static_cast<std::int64_t>(std::floor(p.x() / kScanLocalCell));
       const auto iy = static_cast<std::int64_t>(std::floor(p.y() / kScanLocalCell));
       if (!taken.insert(ix * 2000003 + iy).second) continue;
-      local.push_back(p);
-      local_radius = std::max(local_radius, (p - here).norm());
+      points.push_back(p);
+      radius = std::max(radius, (p - here).norm());
     }
   }
-  if (local.size() > kScanMaxLocalPoints) {
-    const double stride = static_cast<double>(local.size()) / static_cast<double>(kScanMaxLocalPoints);
+  if (points.size() > kScanMaxLocalPoints) {
+    const double stride = static_cast<double>(points.size()) / static_cast<double>(kScanMaxLocalPoints);
     std::vector<Eigen::Vector2d> kept;
-    for (std::size_t i = 0; i < kScanMaxLocalPoints; ++i) kept.push_back(local[static_cast<std::size_t>(i * stride)]);
-    local = std::move(kept);
+    for (std::size_t i = 0; i < kScanMaxLocalPoints; ++i) kept.push_back(points[static_cast<std::size_t>(i * stride)]);
+    points = std::move(kept);
   }
+  return points;
+}
+
+std::unique_ptr<ScanField> Slam::old_scan_field(const Eigen::Vector2d& here, double reach,
+                                                const std::function<bool(const KeptScan&)>& old_enough) const {
   std::vector<ScanRay> old;
-  const double reach = local_radius + o.max_translation + 3.0 * kScanSigma;
   // Old scans from poses within kScanKeyDistance of the last one used add
   // little: one in such a run is used.
   Eigen::Vector3d last_used(std::nan(""), 0.0, 0.0);
   for (const KeptScan& s : scans_) {
-    if (s.path > path_distance_ - a.loop_min_gap_path) break;  // (kept in the order of travel)
-    const auto [R, t] = pose_of(s);
+    if (!old_enough(s)) break;  // (kept in the order of travel)
+    const auto [R, t] = scan_pose(s);
     const double heading = std::atan2(R(1, 0), R(0, 0));
     if (std::isfinite(last_used.x()) && (t - last_used.head<2>()).norm() < kScanKeyDistance &&
         std::abs(std::remainder(heading - last_used.z(), 2.0 * std::numbers::pi)) < kScanKeyTurn)
@@ -560,7 +576,18 @@ ScanPlacement Slam::place_scans(const Eigen::Vector2d& here, const MapMatchOptio
       if ((p - here).norm() <= reach) old.push_back({from, p});
     }
   }
-  field = std::make_unique<ScanField>(old, kScanResolution, kScanSigma, kScanMiss);
+  return std::make_unique<ScanField>(old, kScanResolution, kScanSigma, kScanMiss);
+}
+
+ScanPlacement Slam::place_scans(const Eigen::Vector2d& here, const MapMatchOptions& o,
+                                std::unique_ptr<ScanField>& field, std::vector<Eigen::Vector2d>& local) const {
+  const AssociationConfig& a = config_.association;
+  double local_radius = 0.0;
+  local = scan_points([&](const KeptScan& s) { return s.path >= path_distance_ - a.loop_local_path; }, here,
+                      local_radius);
+  const double reach = local_radius + o.max_translation + 3.0 * kScanSigma;
+  field = old_scan_field(here, reach,
+                         [&](const KeptScan& s) { return s.path <= path_distance_ - a.loop_min_gap_path; });
   ScanSearchOptions so;
   so.max_translation = o.max_translation;
   so.max_rotation = std::min(o.max_rotation, kScanMaxRotation);
@@ -570,16 +597,22 @@ ScanPlacement Slam::place_scans(const Eigen::Vector2d& here, const MapMatchOptio
 }
 
 void Slam::relate_to_old_pose(const PlanarMotion& T, const MapMatchHypothesis& h) {
-  const int current = problem_->num_pose_nodes() - 1;
   const Eigen::Vector2d placed = T.apply(Eigen::Vector2d(x_r_[kX], x_r_[kY]));
-  const double old_path = path_distance_ - config_.association.loop_min_gap_path;
+  const Eigen::Vector3d sigma(h.sigma_translation, h.sigma_translation, h.sigma_rotation);
+  relate_to_nearest_node(Eigen::Vector3d(placed.x(), placed.y(), wrap_angle(x_r_[kTheta] + T.theta)),
+                         sigma.cwiseProduct(sigma).asDiagonal(),
+                         path_distance_ - config_.association.loop_min_gap_path);
+}
+
+void Slam::relate_to_nearest_node(const Eigen::Vector3d& placed, const Eigen::Matrix3d& C_placed, double newest_path) {
+  const int current = problem_->num_pose_nodes() - 1;
   int nearest = -1;
   double best = std::numeric_limits<double>::infinity();
   for (int node = 0; node < current; ++node) {
     const std::size_t record = problem_->node_record(node);
-    if (record >= record_path_.size() || record_path_[record] > old_path) break;  // (nodes in the order of travel)
+    if (record >= record_path_.size() || record_path_[record] > newest_path) break;  // (nodes in the order of travel)
     const Pose6 x = problem_->node_value(node);
-    const double d = (Eigen::Vector2d(x[kX], x[kY]) - placed).norm();
+    const double d = (Eigen::Vector2d(x[kX], x[kY]) - placed.head<2>()).norm();
     if (d < best) {
       best = d;
       nearest = node;
@@ -588,13 +621,194 @@ void Slam::relate_to_old_pose(const PlanarMotion& T, const MapMatchHypothesis& h
   if (nearest < 0) return;
   const Pose6 from = problem_->node_value(nearest);
   const double c = std::cos(from[kTheta]), s = std::sin(from[kTheta]);
-  const Eigen::Vector2d d = placed - Eigen::Vector2d(from[kX], from[kY]);
-  const Eigen::Vector3d z(c * d.x() + s * d.y(), -s * d.x() + c * d.y(), wrap_angle(x_r_[kTheta] + T.theta - from[kTheta]));
-  const Eigen::Vector3d sigma(h.sigma_translation, h.sigma_translation, h.sigma_rotation);
-  problem_->relate(nearest, current, z, sigma.cwiseProduct(sigma).asDiagonal());
+  Eigen::Matrix3d Rt = Eigen::Matrix3d::Identity();  // map frame → the old node's frame
+  Rt.topLeftCorner<2, 2>() << c, s, -s, c;
+  const Eigen::Vector2d d = placed.head<2>() - Eigen::Vector2d(from[kX], from[kY]);
+  const Eigen::Vector3d z(c * d.x() + s * d.y(), -s * d.x() + c * d.y(), wrap_angle(placed.z() - from[kTheta]));
+  problem_->relate(nearest, current, z, Rt * C_placed * Rt.transpose());
   log_->debug("step ", step_, ": pose relation to the pose node of step record ", problem_->node_record(nearest), " (",
-              best, " m from where the scans put the robot), sigma ", h.sigma_translation, " m, ",
-              h.sigma_rotation * 180.0 / std::numbers::pi, " deg");
+              best, " m from where the scans put the robot), sigma ", std::sqrt(C_placed(0, 0)), " m, ",
+              std::sqrt(C_placed(2, 2)) * 180.0 / std::numbers::pi, " deg");
+}
+
+// Relocalizing after an uncertain step (association.relocalize_by_scans).
+// A logging gap leaves the robot metres and degrees from where its wheels
+// say, often back on mapped ground; the features it then sees are matched with
+// a pose that uncertain, and a wrong match shrinks the covariance as much as
+// a right one. The scans are kept anyway (keep_scans): those taken from the
+// uncertain step on are gathered (mapping goes on) until they hold as many
+// end points as a loop-closing search's local map, and then placed on every
+// older scan by the same exhaustive search (scan_evidence.hpp) in a window
+// of 3σ of the prediction at the uncertain step. A unique placement sets the
+// pose; one whose rivals slide along a corridor sets the heading and the
+// position across it.
+void Slam::relocalize(const DataStep& data) {
+  const std::size_t now = trajectory_.size();
+  const bool has_older_scans = !scans_.empty() && scans_.front().record < now;
+  if (step_motion_Q_.rows() == static_cast<Eigen::Index>(dofs_.size()) && has_older_scans) {
+    const auto [step_xy, step_theta] = planar_sigmas(step_motion_Q_, dofs_);
+    if (step_xy >= kRelocalizeStepSigma || step_theta >= kRelocalizeStepSigmaRotation) {
+      // (A second jump while gathering starts the gathering again: the scans before it are old now.)
+      ++stats_.relocalize_steps;
+      const auto [sigma_xy, sigma_theta] = planar_sigmas(checked_marginal(robot_idx_), dofs_);
+      relocalizing_ = Relocalizing{true, now, path_distance_, 0, step_xy, step_theta, sigma_xy, sigma_theta};
+      log_->debug("step ", step_, ": an uncertain step (its odometry's sigma ", step_xy, " m, ",
+                  step_theta * 180.0 / std::numbers::pi, " deg): its scans will be placed on the older ones");
+    }
+  }
+  if (!relocalizing_.active) return;
+  const std::size_t from = relocalizing_.from_record;
+  // The gathered scans' relative poses are the odometry's and the matches' since the uncertain step.
+  double radius = 0.0;
+  const Eigen::Vector2d here(x_r_[kX], x_r_[kY]);
+  const std::vector<Eigen::Vector2d> points =
+      scan_points([&](const KeptScan& s) { return s.record >= from; }, here, radius);
+  relocalizing_.points = points.size();
+  if (points.size() < kScanMaxLocalPoints && path_distance_ - relocalizing_.from_path < config_.association.loop_local_path)
+    return;
+  relocalizing_.active = false;
+  const auto at = [&](int dof) {
+    const auto it = std::find(dofs_.begin(), dofs_.end(), dof);
+    return it == dofs_.end() ? -1 : static_cast<int>(it - dofs_.begin());
+  };
+  const int ix = at(kX), iy = at(kY), it = at(kTheta);
+  if (ix < 0 || iy < 0 || it < 0) return;
+
+  // The window: 3σ of the prediction at the uncertain step, or now if larger
+  // (matches made since with a pose that uncertain may be wrong and still
+  // have shrunk the covariance); at most the loop search's hard limits.
+  const Eigen::MatrixXd P = checked_marginal(robot_idx_);
+  const auto [sigma_xy_now, sigma_theta_now] = planar_sigmas(P, dofs_);
+  const double sigma_xy = std::max(sigma_xy_now, relocalizing_.sigma_xy);
+  const double sigma_theta = std::max(sigma_theta_now, relocalizing_.sigma_theta);
+  std::ostringstream what;
+  what.precision(3);
+  what << "step " << step_ << ": after an uncertain step (its odometry's sigma " << relocalizing_.step_sigma_xy
+       << " m, " << relocalizing_.step_sigma_theta * 180.0 / std::numbers::pi << " deg) the scans of " << now - from + 1
+       << " steps (" << points.size() << " end points) ";
+  if (points.size() < kRelocalizeMinPoints) {
+    ++stats_.relocalize_refused;
+    log_->debug(what.str(), "are too few to place");
+    return;
+  }
+  ScanSearchOptions so;
+  so.max_translation = std::min(kMaxWindowTranslation, 3.0 * sigma_xy);
+  so.max_rotation = std::min(kScanMaxRotation, 3.0 * sigma_theta);
+  so.rotation_step = kScanRotationStep;
+  so.rival_ratio = kScanUniqueRatio;
+  const double reach = radius + so.max_translation + 3.0 * kScanSigma;
+  const std::unique_ptr<ScanField> field =
+      old_scan_field(here, reach, [&](const KeptScan& s) { return s.record < from; });
+  const ScanPlacement p = field->search(points, here, so);
+  what << "placed on the older ones within " << so.max_translation << " m, "
+       << so.max_rotation * 180.0 / std::numbers::pi << " deg: ";
+
+  // The ground truth's verdict (when known) on a placement: the robot's pose
+  // relative to the poses of the five older scans nearest to where it puts
+  // the robot, against the true relative poses.
+  const auto against_truth = [&](const PlanarMotion& T) -> std::optional<std::pair<double, double>> {
+    if (!data.ground_truth || ground_truth_.empty()) return std::nullopt;
+    const Eigen::Vector2d placed = T.apply(here);
+    std::vector<std::pair<double, double>> by_distance;  // (distance, path)
+    for (const KeptScan& s : scans_)
+      if (s.record < from) by_distance.emplace_back((scan_pose(s).second - placed).norm(), s.path);
+    const auto n = std::min<std::ptrdiff_t>(5, static_cast<std::ptrdiff_t>(by_distance.size()));
+    std::partial_sort(by_distance.begin(), by_distance.begin() + n, by_distance.end());
+    std::vector<double> paths;
+    for (std::ptrdiff_t i = 0; i < n; ++i) paths.push_back(by_distance[static_cast<std::size_t>(i)].second);
+    return disagreement_with_ground_truth(T, paths, data);
+  };
+  const auto verdict = [&](const PlanarMotion& T) {
+    std::ostringstream v;
+    v.precision(3);
+    if (const auto off = against_truth(T))
+      v << "; against the ground truth " << off->first << " m, " << off->second * 180.0 / std::numbers::pi << " deg off";
+    return v.str();
+  };
+  if (!p.found || p.score < kRelocalizeMinScore) {
+    ++stats_.relocalize_refused;
+    log_->debug(what.str(), "best score ", p.score, ", under ", kRelocalizeMinScore, ": nothing there to place them on");
+    return;
+  }
+  const bool along_a_line = p.rival_score > 0.0 && p.slide_extent > 0.0;
+  if (p.rival_score > 0.0 && !along_a_line) {
+    ++stats_.relocalize_refused;
+    if (log_->enabled(LogLevel::Debug))
+      log_->debug(what.str(), "best score ", p.score, " at ", p.best.t.norm(), " m, ",
+                  p.best.theta * 180.0 / std::numbers::pi, " deg, a rival as good elsewhere (score ", p.rival_score,
+                  "): not used", verdict(p.best));
+    return;
+  }
+
+  // The pose where the scans fit, to the search's resolution (a cell, a
+  // rotation step); along a corridor whose rivals slide, only the position
+  // across it and the heading.
+  const double sigma_t = kScanResolution, sigma_r = kScanRotationStep;
+  const Eigen::Vector2d n(-p.slide.y(), p.slide.x());  // across the line (when along_a_line)
+  PlanarMotion applied = p.best;
+  if (along_a_line) applied.t = n * n.dot(p.best.t);
+  if (along_a_line)
+    ++stats_.relocalized_along_a_line;
+  else
+    ++stats_.relocalized;
+  what << "score " << p.score << ", correction " << applied.t.norm() << " m, " << applied.theta * 180.0 / std::numbers::pi
+       << " deg" << (along_a_line ? " (across a corridor and in heading: its rivals slide along it)" : "");
+  if (const auto off = against_truth(applied)) {
+    ++stats_.relocalize_checked;
+    // Along a corridor only the heading and the position across it were set: the heading is checked.
+    const bool wrong = off->second > 5.0 * std::numbers::pi / 180.0 || (!along_a_line && off->first > 1.0);
+    if (wrong) ++stats_.relocalize_wrong;
+    what << "; against the ground truth " << off->first << " m, " << off->second * 180.0 / std::numbers::pi << " deg off"
+         << (wrong ? " (wrong)" : "");
+  }
+  log_->info(what.str());
+
+  Eigen::Matrix2d C_xy = sigma_t * sigma_t * Eigen::Matrix2d::Identity();
+  if (along_a_line) {  // along the line no more than the robot's 3σ there
+    Eigen::Matrix2d P_xy;
+    P_xy << P(ix, ix), P(ix, iy), P(iy, ix), P(iy, iy);
+    C_xy += 9.0 * p.slide.dot(P_xy * p.slide) * p.slide * p.slide.transpose();
+  }
+  if (problem_) {
+    // As a loop closure (close_loops): a pose relation to the old pose node
+    // nearest to where the scans put the robot, and a first guess — the
+    // poses and the features since the uncertain step moved with the robot.
+    Eigen::Matrix3d C_placed = Eigen::Matrix3d::Zero();
+    C_placed.topLeftCorner<2, 2>() = C_xy;
+    C_placed(2, 2) = sigma_r * sigma_r;
+    const Eigen::Vector2d placed = applied.apply(here);
+    relate_to_nearest_node(Eigen::Vector3d(placed.x(), placed.y(), wrap_angle(x_r_[kTheta] + applied.theta)), C_placed,
+                           from > 0 && from - 1 < record_path_.size() ? record_path_[from - 1] : 0.0);
+    std::vector<std::pair<int, PlanarMotion>> moves;
+    for (std::size_t i = 0; i < features_.size(); ++i)
+      if (!features_[i].state_idx.empty() && features_[i].created_path >= relocalizing_.from_path)
+        moves.emplace_back(static_cast<int>(i), applied);
+    problem_->warp(
+        [&](std::size_t record) -> std::optional<PlanarMotion> {
+          if (record >= from) return applied;
+          return std::nullopt;
+        },
+        applied, moves);
+  } else {
+    // A filter: one update of the robot's pose; what it mapped since the
+    // uncertain step moves with it through the cross-covariances.
+    LinearizedObservation ob;
+    ob.idx = {robot_idx_[static_cast<std::size_t>(ix)], robot_idx_[static_cast<std::size_t>(iy)],
+              robot_idx_[static_cast<std::size_t>(it)]};
+    if (along_a_line) {
+      ob.eta = Eigen::Vector2d(n.dot(p.best.t), p.best.theta);
+      ob.J = Eigen::MatrixXd::Zero(2, 3);
+      ob.J.row(0) << n.x(), n.y(), 0.0;
+      ob.J(1, 2) = 1.0;
+      ob.C_eta = Eigen::Vector2d(sigma_t * sigma_t, sigma_r * sigma_r).asDiagonal();
+    } else {
+      ob.eta = Eigen::Vector3d(p.best.t.x(), p.best.t.y(), p.best.theta);
+      ob.J = Eigen::MatrixXd::Identity(3, 3);
+      ob.C_eta = Eigen::Vector3d(sigma_t * sigma_t, sigma_t * sigma_t, sigma_r * sigma_r).asDiagonal();
+    }
+    apply_correction(estimator_update({ob}, "update (relocalization by the scans)"));
+  }
+  associator_.map_changed();
 }
 
 double Slam::typical_speed() const {

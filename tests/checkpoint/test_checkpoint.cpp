@@ -261,7 +261,7 @@ bool have_victoria_park() {
 /// The generated ring of the loop-closing runs, on wheel odometry, with
 /// loop_closing on: checkpoints at each of `checkpoints`, resumed to `stop_at`.
 void expect_loop_closing_resume(const std::string& estimator, const std::vector<std::int64_t>& checkpoints,
-                                std::int64_t stop_at, bool scans = false) {
+                                std::int64_t stop_at, bool scans = false, bool relocalize = false) {
   sim_building::GeneratorSettings settings;
   settings.laser.gap_probability = 0.003;
   settings.laser.gap_min = 40.0;
@@ -269,10 +269,11 @@ void expect_loop_closing_resume(const std::string& estimator, const std::vector<
   const fs::path dir = scratch("building");
   sim_building::write_data_set(sim_building::simulate(settings), dir);
   setenv("MSPACE_SIM_BUILDING", dir.c_str(), 1);
-  const auto edit = [scans](RunConfig& config) {
+  const auto edit = [scans, relocalize](RunConfig& config) {
     config.source.params.set("odometry", std::string("wheel"));
     config.association.loop_closing = true;
     config.association.loop_scans = scans;
+    config.association.relocalize_by_scans = relocalize;
   };
   for (std::int64_t at : checkpoints) {
     SCOPED_TRACE("checkpoint at step " + std::to_string(at));
@@ -292,6 +293,15 @@ TEST(Checkpoint, LoopClosingSmoother) { expect_loop_closing_resume("smoother", {
 // records and paths) are run state: a resumed run searches the same scans.
 TEST(Checkpoint, LoopClosingSmootherWithScans) {
   expect_loop_closing_resume("smoother", {3150, 3220}, 3248, true);
+}
+
+// With association.relocalize_by_scans a run between an uncertain step and
+// the scans' placement gathers the scans since that step (Slam::relocalize):
+// the gathering and the prediction's σ there are run state. Here the scans
+// after an uncertain step at 3011 are placed at 3097 (measured 2026-12-07, a
+// 0.6 m correction under the smoother); the checkpoint lies between the two.
+TEST(Checkpoint, LoopClosingSmootherRelocalizing) {
+  expect_loop_closing_resume("smoother", {3050}, 3248, true, true);
 }
 
 // The smoother: its running EKF and triggers (PSTA) and the kernel's
