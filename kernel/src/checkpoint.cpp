@@ -160,8 +160,7 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
                            static_cast<double>(s.relocalized_along_a_line), static_cast<double>(s.relocalize_refused),
                            static_cast<double>(s.relocalize_checked), static_cast<double>(s.relocalize_wrong),
                            relocalizing_.active ? 1.0 : 0.0, static_cast<double>(relocalizing_.from_record),
-                           relocalizing_.from_path, static_cast<double>(relocalizing_.points),
-                           relocalizing_.step_sigma_xy, relocalizing_.step_sigma_theta, relocalizing_.sigma_xy,
+                           relocalizing_.from_path, relocalizing_.step_sigma_xy, relocalizing_.step_sigma_theta, relocalizing_.sigma_xy,
                            relocalizing_.sigma_theta}));
   const PendingClosure& pending = pending_closure_;
   run.put("loop_pending", row_of({pending.active ? 1.0 : 0.0, pending.motion.theta, pending.motion.t.x(),
@@ -301,12 +300,12 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     if (association.cols() != 4 && association.cols() != 6)
       throw std::invalid_argument("run state: association has " + std::to_string(association.cols()) +
                                   " columns, expected 4 or 6");
-    // 32 entries; 14 in a checkpoint written before last_revisit_path_ was kept (then: the last anchor), 15 before
+    // 31 entries; 14 in a checkpoint written before last_revisit_path_ was kept (then: the last anchor), 15 before
     // the closures confirmed by repeated searches were counted (then: none), 16 before the wider window's, 18
     // before relocalization by the scans (then: none, and not gathering).
     const Eigen::MatrixXd& loops = get_state(run, "loops", 1, -1, "run state");
-    if (loops.cols() < 14 || (loops.cols() > 18 && loops.cols() != 32) || loops.cols() == 17)
-      throw fail("run state: 'loops' has " + std::to_string(loops.cols()) + " entries, 14, 15, 16, 18 or 32 expected");
+    if (loops.cols() < 14 || (loops.cols() > 18 && loops.cols() != 31) || loops.cols() == 17)
+      throw fail("run state: 'loops' has " + std::to_string(loops.cols()) + " entries, 14, 15, 16, 18 or 31 expected");
     // 11 entries; 10 in a checkpoint written before the pending placement's repeats were kept (then: none).
     const Eigen::MatrixXd& pending_row = get_state(run, "loop_pending", 1, -1, "run state");
     if (pending_row.cols() != 10 && pending_row.cols() != 11)
@@ -411,7 +410,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
       s.loop_wide_searches = integer_at(loops, 16, 0, 1e15, "loop_wide_searches");
       s.loop_wide_closures = integer_at(loops, 17, 0, 1e15, "loop_wide_closures");
     }
-    if (loops.cols() == 32) {
+    if (loops.cols() == 31) {
       s.relocalize_steps = integer_at(loops, 18, 0, 1e15, "relocalize_steps");
       s.relocalized = integer_at(loops, 19, 0, 1e15, "relocalized");
       s.relocalized_along_a_line = integer_at(loops, 20, 0, 1e15, "relocalized_along_a_line");
@@ -421,11 +420,10 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
       relocalizing_.active = loops(0, 24) != 0.0;
       relocalizing_.from_record = static_cast<std::size_t>(integer_at(loops, 25, 0, 1e15, "relocalizing from_record"));
       relocalizing_.from_path = loops(0, 26);
-      relocalizing_.points = static_cast<std::size_t>(integer_at(loops, 27, 0, 1e15, "relocalizing points"));
-      relocalizing_.step_sigma_xy = loops(0, 28);
-      relocalizing_.step_sigma_theta = loops(0, 29);
-      relocalizing_.sigma_xy = loops(0, 30);
-      relocalizing_.sigma_theta = loops(0, 31);
+      relocalizing_.step_sigma_xy = loops(0, 27);
+      relocalizing_.step_sigma_theta = loops(0, 28);
+      relocalizing_.sigma_xy = loops(0, 29);
+      relocalizing_.sigma_theta = loops(0, 30);
     }
 
     // The nonlinear problem (after the estimator, whose rows it checks; its

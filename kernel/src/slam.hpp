@@ -462,7 +462,6 @@ class Slam {
     bool active = false;
     std::size_t from_record = 0;  ///< the uncertain step's trajectory index
     double from_path = 0.0;       ///< m of travel there
-    std::size_t points = 0;       ///< end points gathered by the last step
     double step_sigma_xy = 0.0, step_sigma_theta = 0.0;  ///< the uncertain step's own odometry σ (m, rad)
     double sigma_xy = 0.0, sigma_theta = 0.0;  ///< the robot's σ predicted there (m, rad)
   };

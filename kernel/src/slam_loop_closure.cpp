@@ -62,13 +62,24 @@ constexpr double kMaxMotionSigmaRotation = 0.035;   // rad (2°)
 
 /// The planar block of the robot covariance: σ of the position (largest
 /// axis) and of the heading; 0 where the state does not estimate them.
-std::pair<double, double> planar_sigmas(const Eigen::MatrixXd& P, const std::vector<int>& dofs) {
-  int ix = -1, iy = -1, it = -1;
+/// Where x, y and the heading sit among the robot's estimated pose
+/// coordinates `dofs` (−1 where they are not estimated).
+struct PlanarIndices {
+  int x = -1, y = -1, theta = -1;
+  bool complete() const { return x >= 0 && y >= 0 && theta >= 0; }
+};
+PlanarIndices planar_indices(const std::vector<int>& dofs) {
+  PlanarIndices p;
   for (std::size_t i = 0; i < dofs.size(); ++i) {
-    if (dofs[i] == kX) ix = static_cast<int>(i);
-    if (dofs[i] == kY) iy = static_cast<int>(i);
-    if (dofs[i] == kTheta) it = static_cast<int>(i);
+    if (dofs[i] == kX) p.x = static_cast<int>(i);
+    if (dofs[i] == kY) p.y = static_cast<int>(i);
+    if (dofs[i] == kTheta) p.theta = static_cast<int>(i);
   }
+  return p;
+}
+
+std::pair<double, double> planar_sigmas(const Eigen::MatrixXd& P, const std::vector<int>& dofs) {
+  const auto [ix, iy, it] = planar_indices(dofs);
   double position = 0.0, heading = 0.0;
   if (ix >= 0 && iy >= 0) position = std::sqrt(std::max(0.0, std::max(P(ix, ix), P(iy, iy))));
   if (it >= 0) heading = std::sqrt(std::max(0.0, P(it, it)));
@@ -651,7 +662,7 @@ void Slam::relocalize(const DataStep& data) {
       // (A second jump while gathering starts the gathering again: the scans before it are old now.)
       ++stats_.relocalize_steps;
       const auto [sigma_xy, sigma_theta] = planar_sigmas(checked_marginal(robot_idx_), dofs_);
-      relocalizing_ = Relocalizing{true, now, path_distance_, 0, step_xy, step_theta, sigma_xy, sigma_theta};
+      relocalizing_ = Relocalizing{true, now, path_distance_, step_xy, step_theta, sigma_xy, sigma_theta};
       log_->debug("step ", step_, ": an uncertain step (its odometry's sigma ", step_xy, " m, ",
                   step_theta * 180.0 / std::numbers::pi, " deg): its scans will be placed on the older ones");
     }
@@ -663,16 +674,12 @@ void Slam::relocalize(const DataStep& data) {
   const Eigen::Vector2d here(x_r_[kX], x_r_[kY]);
   const std::vector<Eigen::Vector2d> points =
       scan_points([&](const KeptScan& s) { return s.record >= from; }, here, radius);
-  relocalizing_.points = points.size();
   if (points.size() < kScanMaxLocalPoints && path_distance_ - relocalizing_.from_path < config_.association.loop_local_path)
     return;
   relocalizing_.active = false;
-  const auto at = [&](int dof) {
-    const auto it = std::find(dofs_.begin(), dofs_.end(), dof);
-    return it == dofs_.end() ? -1 : static_cast<int>(it - dofs_.begin());
-  };
-  const int ix = at(kX), iy = at(kY), it = at(kTheta);
-  if (ix < 0 || iy < 0 || it < 0) return;
+  const PlanarIndices planar = planar_indices(dofs_);
+  if (!planar.complete()) return;
+  const int ix = planar.x, iy = planar.y, it = planar.theta;
 
   // The window: 3σ of the prediction at the uncertain step, or now if larger
   // (matches made since with a pose that uncertain may be wrong and still
