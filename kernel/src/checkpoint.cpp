@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <string>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -146,6 +147,36 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
         mf.seen_since_path;
   }
   run.put("loop_features", loop_features);
+  // With ground truth: the matches' check (check_matches_against_ground_truth)
+  // — its counters, and per feature with one its truth image (id, length),
+  // the images' values one after another.
+  run.put("match_truth", row_of({static_cast<double>(s.matches_checked), static_cast<double>(s.matches_wrong),
+                                 static_cast<double>(s.matches_long_unseen),
+                                 static_cast<double>(s.matches_wrong_long_unseen)}));
+  {
+    std::vector<std::pair<int, const Eigen::VectorXd*>> images;
+    Eigen::Index n_values = 0;
+    for (const MapFeature& mf : features_)
+      if (mf.truth_image.size() > 0) {
+        images.emplace_back(mf.id, &mf.truth_image);
+        n_values += mf.truth_image.size();
+      }
+    Eigen::MatrixXd index(static_cast<Eigen::Index>(images.size()), 2);
+    Eigen::MatrixXd values(n_values, 1);
+    Eigen::Index at = 0;
+    for (std::size_t i = 0; i < images.size(); ++i) {
+      index.row(static_cast<Eigen::Index>(i)) << images[i].first, static_cast<double>(images[i].second->size());
+      values.middleRows(at, images[i].second->size()) = *images[i].second;
+      at += images[i].second->size();
+    }
+    Eigen::MatrixXd wrong(static_cast<Eigen::Index>(wrong_matches_.size()), 3);
+    for (std::size_t i = 0; i < wrong_matches_.size(); ++i)
+      wrong.row(static_cast<Eigen::Index>(i)) << static_cast<double>(wrong_matches_[i].step), wrong_matches_[i].feature,
+          static_cast<double>(wrong_matches_[i].previous_step);
+    run.put("match_truth_wrong", wrong);
+    run.put("truth_image_index", index);
+    run.put("truth_image_values", values);
+  }
   run.put("record_path",
           Eigen::Map<const Eigen::MatrixXd>(record_path_.data(), static_cast<Eigen::Index>(record_path_.size()), 1));
   run.put("loops", row_of({last_loop_attempt_path_, static_cast<double>(last_loop_local_signature_), last_anchor_path_,
@@ -355,6 +386,24 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
       features[i].seen_since_path = loop_features.rows() > 4 ? loop_features(4, c) : features[i].created_path;
       features[i].merged_into = static_cast<int>(integer_at(loop_features.col(c).transpose(), 3, 0, 1e9, "merged_into"));
     }
+    // The matches' ground-truth check (absent from checkpoints written before it existed: then nothing is checked
+    // until each feature's next update).
+    if (run.has("truth_image_index")) {
+      const Eigen::MatrixXd& index = get_state(run, "truth_image_index", -1, 2, "run state");
+      const Eigen::MatrixXd& values = get_state(run, "truth_image_values", -1, 1, "run state");
+      std::unordered_map<int, std::size_t> at_id;
+      for (std::size_t i = 0; i < features.size(); ++i) at_id[features[i].id] = i;
+      Eigen::Index at = 0;
+      for (Eigen::Index r = 0; r < index.rows(); ++r) {
+        const auto id = static_cast<int>(integer_at(index.row(r), 0, 1, 2e9, "truth image feature id"));
+        const Eigen::Index n = integer_at(index.row(r), 1, 1, 1e6, "truth image length");
+        const auto it = at_id.find(id);
+        if (it == at_id.end()) throw fail("run state: a truth image of feature #" + std::to_string(id) + ", which the map does not hold");
+        if (at + n > values.rows()) throw fail("run state: 'truth_image_values' is shorter than its index says");
+        features[it->second].truth_image = values.middleRows(at, n);
+        at += n;
+      }
+    }
     std::vector<StampedPose> trajectory = poses_from(run, "trajectory");
     std::vector<StampedPose> ground_truth = poses_from(run, "ground_truth");
     std::vector<StampedPose> evaluated = poses_from(run, "evaluated");
@@ -425,6 +474,20 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
       relocalizing_.sigma_xy = loops(0, 29);
       relocalizing_.sigma_theta = loops(0, 30);
     }
+    std::vector<WrongMatch> wrong_matches;
+    if (run.has("match_truth")) {
+      const Eigen::MatrixXd& match_truth = get_state(run, "match_truth", 1, 4, "run state");
+      s.matches_checked = integer_at(match_truth, 0, 0, 1e15, "matches_checked");
+      s.matches_wrong = integer_at(match_truth, 1, 0, 1e15, "matches_wrong");
+      s.matches_long_unseen = integer_at(match_truth, 2, 0, 1e15, "matches_long_unseen");
+      s.matches_wrong_long_unseen = integer_at(match_truth, 3, 0, 1e15, "matches_wrong_long_unseen");
+      const Eigen::MatrixXd& wrong = get_state(run, "match_truth_wrong", -1, 3, "run state");
+      wrong_matches.clear();
+      for (Eigen::Index r = 0; r < wrong.rows(); ++r)
+        wrong_matches.push_back({integer_at(wrong.row(r), 0, 0, 1e15, "wrong match step"),
+                                 static_cast<int>(integer_at(wrong.row(r), 1, 0, 2e9, "wrong match feature")),
+                                 integer_at(wrong.row(r), 2, 0, 1e15, "wrong match previous step")});
+    }
 
     // The nonlinear problem (after the estimator, whose rows it checks; its
     // live factors bind to the restored features).
@@ -455,6 +518,7 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     last_revisit_path_ = loops.cols() > 14 ? loops(0, 14) : last_anchor_path_;
     pending_closure_ = std::move(pending);
     scans_ = std::move(scans);
+    wrong_matches_ = std::move(wrong_matches);
   } catch (const PersistenceError&) {
     throw;
   } catch (const std::exception& e) {

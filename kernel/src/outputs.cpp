@@ -443,6 +443,14 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     }
     y << YAML::EndMap;
   }
+  if (st.matches_checked > 0) {
+    y << YAML::Key << "matches_against_ground_truth" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "checked" << YAML::Value << st.matches_checked;
+    y << YAML::Key << "wrong" << YAML::Value << st.matches_wrong;
+    y << YAML::Key << "to_features_long_unseen" << YAML::Value << st.matches_long_unseen;
+    y << YAML::Key << "wrong_to_features_long_unseen" << YAML::Value << st.matches_wrong_long_unseen;
+    y << YAML::EndMap;
+  }
   if (slam.config().association.relocalize_by_scans) {
     y << YAML::Key << "relocalization" << YAML::Value << YAML::BeginMap;
     y << YAML::Key << "uncertain_steps" << YAML::Value << st.relocalize_steps;
@@ -643,6 +651,13 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
     if (st.relocalize_checked > 0)
       os << "; against the ground truth " << st.relocalize_wrong << " of " << st.relocalize_checked << " wrong";
     os << "\n";
+  }
+  if (st.matches_checked > 0) {
+    std::ostringstream gap;  // (the stream above writes fixed-point)
+    gap << slam.config().association.loop_min_gap_path;
+    os << "  associations against the ground truth: " << st.matches_wrong << " of " << st.matches_checked
+       << " matches paired another object (" << st.matches_wrong_long_unseen << " of the " << st.matches_long_unseen
+       << " with features unseen for over " << gap.str() << " m of travel)\n";
   }
   os << "  state dimension " << s.state_dimension << "\n";
   for (const auto& [type, by_dim] : s.features_by_dim) {

@@ -53,6 +53,11 @@ struct MapFeature : FeatureBookkeeping {
   int id = 0;
   int type = 0;                      ///< index into Slam::feature_types()
   std::shared_ptr<Feature> feature;  ///< keeps its plugin library loaded
+  /// With ground truth: the feature's coordinates taken into the true frame
+  /// through the robot's pose after the update of its newest evidence (where
+  /// the object the robot saw then truly is); empty without ground truth.
+  /// Slam::check_matches_against_ground_truth compares later matches with it.
+  Eigen::VectorXd truth_image;
 };
 
 /// A coordinate block common to several features (T-RO §VI), e.g. the corner
@@ -132,6 +137,15 @@ struct RunStats {
   std::int64_t relocalize_refused = 0;
   std::int64_t relocalize_checked = 0;
   std::int64_t relocalize_wrong = 0;
+  /// With ground truth: every match of a measurement with a feature in the
+  /// estimator checked (check_matches_against_ground_truth); wrong: the
+  /// measurement does not fit the feature from the pose that the truth and
+  /// the feature's own neighbourhood of the map put the robot at; of them,
+  /// to features last seen over association.loop_min_gap_path m of travel ago.
+  std::int64_t matches_checked = 0;
+  std::int64_t matches_wrong = 0;
+  std::int64_t matches_wrong_long_unseen = 0;
+  std::int64_t matches_long_unseen = 0;
   double seconds_predict = 0.0;
   double seconds_extract = 0.0;  ///< sensors' extractors (per sensor in the health reports)
   double seconds_associate = 0.0;  ///< gating, selection and keeping the spatial index in step
@@ -254,6 +268,14 @@ class Slam {
   /// Current value of a shared coordinate (from its first member).
   Eigen::VectorXd shared_value(const SharedCoordinate& c) const;
   const RunStats& stats() const { return stats_; }
+  /// With ground truth: the matches check_matches_against_ground_truth found
+  /// pairing another object, in order.
+  struct WrongMatch {
+    std::int64_t step = 0;           ///< the step of the match
+    int feature = 0;                 ///< the feature's id
+    std::int64_t previous_step = 0;  ///< the step of the feature's newest evidence before it
+  };
+  const std::vector<WrongMatch>& wrong_matches() const { return wrong_matches_; }
   /// Elapsed time of loading the source in this process, before the first
   /// step: its plugin library and its construction (a log read whole, scan
   /// matching done at load time, …) and the steps run.skip_steps discards
@@ -294,6 +316,9 @@ class Slam {
   void associate(const SensorSlot& sensor, int sensor_index, const std::vector<Measurement>& meas,
                  ReadingWork& work);
   void record_health(int sensor_index, const ReadingWork& w, double extract_seconds);
+  void check_matches_against_ground_truth(const ReadingWork& w);
+  void remember_truth_images();
+  bool planar_robot() const;  ///< only x, y and heading estimated
   void update(std::vector<Match>& matches);
   void add_dense_information(std::vector<ReadingWork>& work);
   void extend(const std::vector<int>& touched);
@@ -483,6 +508,8 @@ class Slam {
   /// The robot's true pose at this step, when the ground truth gives all of
   /// its estimated coordinates (for the noise statistics of sensor_health.hpp).
   std::optional<Pose6> robot_truth_;
+  std::vector<WrongMatch> wrong_matches_;
+  std::vector<int> matched_this_step_;  ///< ids of the features updated this step (with ground truth: remember_truth_images)
   RunStats stats_;
   std::vector<double> record_path_;  ///< path distance of every trajectory record
   double last_loop_attempt_path_ = -1e300;
