@@ -148,11 +148,17 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
   }
   run.put("loop_features", loop_features);
   // With ground truth: the matches' check (check_matches_against_ground_truth)
-  // — its counters, and per feature with one its truth image (id, length),
-  // the images' values one after another.
+  // — its counters; the wrong matches (step, feature id, previous step); per
+  // feature with one its truth image (id, length), and the images' values one
+  // after another.
   run.put("match_truth", row_of({static_cast<double>(s.matches_checked), static_cast<double>(s.matches_wrong),
                                  static_cast<double>(s.matches_long_unseen),
                                  static_cast<double>(s.matches_wrong_long_unseen)}));
+  Eigen::MatrixXd wrong(static_cast<Eigen::Index>(wrong_matches_.size()), 3);
+  for (std::size_t i = 0; i < wrong_matches_.size(); ++i)
+    wrong.row(static_cast<Eigen::Index>(i)) << static_cast<double>(wrong_matches_[i].step), wrong_matches_[i].feature,
+        static_cast<double>(wrong_matches_[i].previous_step);
+  run.put("match_truth_wrong", wrong);
   {
     std::vector<std::pair<int, const Eigen::VectorXd*>> images;
     Eigen::Index n_values = 0;
@@ -169,11 +175,6 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
       values.middleRows(at, images[i].second->size()) = *images[i].second;
       at += images[i].second->size();
     }
-    Eigen::MatrixXd wrong(static_cast<Eigen::Index>(wrong_matches_.size()), 3);
-    for (std::size_t i = 0; i < wrong_matches_.size(); ++i)
-      wrong.row(static_cast<Eigen::Index>(i)) << static_cast<double>(wrong_matches_[i].step), wrong_matches_[i].feature,
-          static_cast<double>(wrong_matches_[i].previous_step);
-    run.put("match_truth_wrong", wrong);
     run.put("truth_image_index", index);
     run.put("truth_image_values", values);
   }
@@ -482,7 +483,6 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
       s.matches_long_unseen = integer_at(match_truth, 2, 0, 1e15, "matches_long_unseen");
       s.matches_wrong_long_unseen = integer_at(match_truth, 3, 0, 1e15, "matches_wrong_long_unseen");
       const Eigen::MatrixXd& wrong = get_state(run, "match_truth_wrong", -1, 3, "run state");
-      wrong_matches.clear();
       for (Eigen::Index r = 0; r < wrong.rows(); ++r)
         wrong_matches.push_back({integer_at(wrong.row(r), 0, 0, 1e15, "wrong match step"),
                                  static_cast<int>(integer_at(wrong.row(r), 1, 0, 2e9, "wrong match feature")),
