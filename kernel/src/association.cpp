@@ -313,6 +313,43 @@ JcbbResult joint_compatibility(const std::vector<Candidate>& candidates, const M
   return tree.search();
 }
 
+// ---- Re-entries -------------------------------------------------------------
+
+MarginalFn widen_robot(MarginalFn marginal, std::vector<int> robot_idx, Eigen::MatrixXd extra) {
+  const auto k = static_cast<Eigen::Index>(robot_idx.size());
+  if (extra.rows() != k || extra.cols() != k)
+    throw std::invalid_argument("widen_robot: a " + std::to_string(extra.rows()) + "x" + std::to_string(extra.cols()) +
+                                " widening for " + std::to_string(k) + " robot rows");
+  return [marginal = std::move(marginal), robot_idx = std::move(robot_idx),
+          extra = std::move(extra)](const std::vector<int>& rows) {
+    Eigen::MatrixXd P = marginal(rows);
+    std::vector<Eigen::Index> at(robot_idx.size(), -1);  // where each robot row falls among `rows`
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      for (std::size_t j = 0; j < robot_idx.size(); ++j)
+        if (rows[i] == robot_idx[j]) at[j] = static_cast<Eigen::Index>(i);
+    for (std::size_t a = 0; a < at.size(); ++a)
+      for (std::size_t b = 0; b < at.size(); ++b)
+        if (at[a] >= 0 && at[b] >= 0)
+          P(at[a], at[b]) += extra(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(b));
+    return P;
+  };
+}
+
+ReentryVerdict confirm_reentries(const std::vector<Candidate>& wide, const std::vector<std::pair<int, int>>& asked,
+                                 const MarginalFn& widened, JcbbOptions options) {
+  ReentryVerdict verdict;
+  verdict.confirmed.assign(asked.size(), false);
+  options.find_rivals = true;
+  verdict.search = joint_compatibility(wide, widened, options);
+  const JcbbResult& jc = verdict.search;
+  if (jc.bounded || jc.rivals_bounded) return verdict;
+  for (std::size_t a = 0; a < asked.size(); ++a)
+    for (int c : jc.chosen)
+      if (wide[c].measurement == asked[a].first && wide[c].feature == asked[a].second)
+        verdict.confirmed[a] = !std::binary_search(jc.disputed.begin(), jc.disputed.end(), c);
+  return verdict;
+}
+
 // ---- Spatial index ----------------------------------------------------------
 
 PlanarBox planar_box(const Feature& f) {
@@ -655,6 +692,13 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   const int k = static_cast<int>(map.robot_idx.size());
 
   std::vector<Candidate> candidates;
+  // With association.reentry_joint_test, the reading's pairs with features
+  // unseen over loop_min_gap_path, gated with the robot's covariance widened
+  // by (scale² − 1) Σ_r (computed at the first such feature).
+  const bool reentry_test = joint && ac.reentry_joint_test && map.travel_unseen;
+  std::vector<Candidate> reentry_candidates;
+  std::vector<bool> is_reentry(reentry_test ? map.features.size() : 0, false);
+  Eigen::MatrixXd widening;
   // Per measurement: min over features of d² / (new-feature threshold).
   std::vector<double> closest(meas.size(), kInf);
   const Eigen::Vector2d sensor_xy(x_ms[kX], x_ms[kY]);
@@ -717,6 +761,16 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
         guarded(type.instance, *type.library, "gating_covariance", [&] { return f.gating_covariance(); });
     if (gate_cov.size() > 0) M += J_of * gate_cov * J_of.transpose();
     feature_product_.valid = false;  // M is this feature's
+    // A re-entry (association.reentry_joint_test): M once more with the
+    // robot's covariance widened, A (scale² Σ_r ...) Aᵀ, for the wide gate.
+    const bool reentering = reentry_test && dim > 0 && map.travel_unseen(mf) > ac.loop_min_gap_path;
+    if (reentering) {
+      if (widening.size() == 0)
+        widening = (ac.reentry_covariance_scale * ac.reentry_covariance_scale - 1.0) * map.marginal(map.robot_idx);
+      scratch_M_wide_.noalias() = A.leftCols(k) * widening * A.leftCols(k).transpose();
+      scratch_M_wide_ += M;
+      is_reentry[static_cast<std::size_t>(fi)] = true;
+    }
 
     for (std::size_t mi = 0; mi < meas.size(); ++mi) {
       // The scratch objects keep their storage from pair to pair: this loop
@@ -741,7 +795,27 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
       // so when that bound is beyond both thresholds the pair can neither be
       // gated in nor make the measurement ambiguous — no factorisation needed.
       const double far = far_threshold(mi_dim);
-      if (!tracing && S.trace() > 0.0 && in.eta.squaredNorm() > far * S.trace()) continue;
+      if (reentering) {
+        // The wide gate first: it admits every pair the filter's gate does.
+        Eigen::MatrixXd S_wide = in.J_eta_o * scratch_M_wide_ * in.J_eta_o.transpose() + C_eta;
+        if (!tracing && in.eta.squaredNorm() > far * S_wide.trace()) continue;
+        const Eigen::LDLT<Eigen::MatrixXd> wide_ldlt(S_wide);
+        const double d2_wide = wide_ldlt.info() == Eigen::Success ? in.eta.dot(wide_ldlt.solve(in.eta)) : kInf;
+        if (d2_wide <= threshold(gate_chi2_, ac.gate_probability, mi_dim)) {
+          Candidate c;
+          c.d2 = d2_wide;
+          c.innovation = in;
+          c.C_eta = C_eta;
+          c.measurement = static_cast<int>(mi);
+          c.feature = fi;
+          c.J_state = in.J_eta_o * A;  // eq. 30
+          c.idx = idx;
+          if (gate_cov.size() > 0) c.C_gate = in.J_eta_o * J_of * gate_cov * J_of.transpose() * in.J_eta_o.transpose();
+          reentry_candidates.push_back(std::move(c));
+        }
+      } else if (!tracing && S.trace() > 0.0 && in.eta.squaredNorm() > far * S.trace()) {
+        continue;
+      }
       scratch_ldlt_.compute(S);
       if (scratch_ldlt_.info() != Eigen::Success || !(scratch_ldlt_.vectorD().array() > 0.0).all()) continue;
       const double d2 = in.eta.dot(scratch_ldlt_.solve(in.eta));
@@ -818,6 +892,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   } else {
     chosen = nearest_neighbour(candidates, static_cast<int>(meas.size()), static_cast<int>(map.features.size()));
   }
+  if (reentry_test) confirm_reentry_pairings(map, candidates, reentry_candidates, is_reentry, widening, chosen);
 
   AssociationResult result;
   std::vector<bool> meas_used(meas.size(), false);
@@ -831,6 +906,49 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
   result.may_create.assign(meas.size(), false);
   for (std::size_t mi = 0; mi < meas.size(); ++mi) result.may_create[mi] = !meas_used[mi] && closest[mi] > 1.0;
   return result;
+}
+
+// The re-entry test (association.reentry_joint_test) on the pairings chosen:
+// those with features unseen over loop_min_gap_path stay only when the
+// widened joint test confirms them (confirm_reentries); the others are
+// dropped, and their measurements, lying in a feature's gate, start nothing.
+void Associator::confirm_reentry_pairings(const AssociationView& map, const std::vector<Candidate>& candidates,
+                                          const std::vector<Candidate>& wide, const std::vector<bool>& is_reentry,
+                                          const Eigen::MatrixXd& widening, std::vector<int>& chosen) {
+  std::vector<std::pair<int, int>> asked;
+  std::vector<int> asked_at;  // positions in `chosen`
+  for (std::size_t i = 0; i < chosen.size(); ++i) {
+    const Candidate& c = candidates[chosen[i]];
+    if (c.tentative || !is_reentry[static_cast<std::size_t>(c.feature)]) continue;
+    asked.emplace_back(c.measurement, c.feature);
+    asked_at.push_back(static_cast<int>(i));
+  }
+  if (asked.empty()) return;
+  ++stats_.reentry_readings;
+  const ReentryVerdict verdict =
+      confirm_reentries(wide, asked, widen_robot(map.marginal, map.robot_idx, widening),
+                        {config_.gate_probability, config_.jcbb_max_nodes, &joint_chi2_, true});
+  stats_.jcbb_nodes += verdict.search.nodes + verdict.search.rival_nodes;
+  std::vector<bool> drop(chosen.size(), false);
+  std::ostringstream refused;
+  for (std::size_t a = 0; a < asked.size(); ++a) {
+    if (verdict.confirmed[a]) {
+      ++stats_.reentry_confirmed;
+      continue;
+    }
+    ++stats_.reentry_refused;
+    drop[static_cast<std::size_t>(asked_at[a])] = true;
+    refused << " measurement " << asked[a].first << " to #" << map.features[asked[a].second].id;
+  }
+  if (refused.tellp() > 0 && log_->enabled(LogLevel::Debug))
+    log_->debug("step ", map.step, ": re-entry test:", refused.str(),
+                " not confirmed", verdict.search.bounded || verdict.search.rivals_bounded ? " (the search gave up)" : "",
+                "; ", verdict.search.disputed.size(), " of ", verdict.search.chosen.size(),
+                " widened pairings disputed");
+  std::vector<int> kept;
+  for (std::size_t i = 0; i < chosen.size(); ++i)
+    if (!drop[i]) kept.push_back(chosen[i]);
+  chosen = std::move(kept);
 }
 
 }  // namespace mspace::kernel

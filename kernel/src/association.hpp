@@ -106,6 +106,32 @@ using MarginalFn = std::function<Eigen::MatrixXd(const std::vector<int>&)>;
 JcbbResult joint_compatibility(const std::vector<Candidate>& candidates, const MarginalFn& marginal,
                                const JcbbOptions& options);
 
+// ---- Re-entries (association.reentry_joint_test) ----------------------------
+
+/// `marginal` with `extra` (robot rows × robot rows) added at the rows
+/// `robot_idx` (wherever they fall in the rows asked for): the robot's
+/// covariance widened, every other entry as it was.
+MarginalFn widen_robot(MarginalFn marginal, std::vector<int> robot_idx, Eigen::MatrixXd extra);
+
+struct ReentryVerdict {
+  std::vector<bool> confirmed;  ///< per pairing asked about
+  JcbbResult search;            ///< the widened search, its rivals included
+};
+
+/// The re-entry test. A pairing with a feature the robot last saw long ago
+/// closes a loop; if the filter's covariance then understates the drift of
+/// the odometry since, its gate may admit another object while the true one
+/// lies outside. `wide` are the reading's candidates with such features gated
+/// with the robot's covariance widened (association.reentry_covariance_scale²
+/// Σ_r; their d² computed so), and `widened` gives that covariance: the error
+/// is one shared error of the robot pose, so the joint test asks for one pose
+/// correction that explains every pairing of a hypothesis. A pairing (measurement, feature position)
+/// of `asked` is confirmed when the best jointly compatible hypothesis over
+/// `wide` makes it and no rival hypothesis with as many pairings leaves it
+/// out (JcbbOptions::find_rivals; a search that gives up confirms nothing).
+ReentryVerdict confirm_reentries(const std::vector<Candidate>& wide, const std::vector<std::pair<int, int>>& asked,
+                                 const MarginalFn& widened, JcbbOptions options);
+
 // ---- Spatial index ----------------------------------------------------------
 
 /// An axis-aligned planar box; `everywhere` for features without a position
@@ -168,6 +194,10 @@ struct AssociationView {
   MarginalFn marginal;
   const std::vector<int>& robot_idx;  ///< estimator rows of the robot pose
   std::int64_t step = 0;
+  /// With association.reentry_joint_test: the travel since the robot last saw
+  /// a feature (metres; a re-entry beyond config.loop_min_gap_path). Null: no
+  /// re-entry test.
+  std::function<double(const MapFeature&)> travel_unseen;
 };
 
 struct AssociationResult {
@@ -185,6 +215,12 @@ struct AssociationStats {
   /// disputed some of the best one's pairings, and the pairings so dropped.
   std::int64_t ambiguous_readings = 0;
   std::int64_t disputed_pairings = 0;
+  /// With association.reentry_joint_test: readings with a re-entry pairing
+  /// (a feature unseen over loop_min_gap_path), and the pairings it
+  /// confirmed and refused.
+  std::int64_t reentry_readings = 0;
+  std::int64_t reentry_confirmed = 0;
+  std::int64_t reentry_refused = 0;
 };
 
 class Associator {
@@ -226,6 +262,10 @@ class Associator {
   void features_in_range(const AssociationView& map, const SensorSlot& sensor, const Eigen::Vector2d& p,
                          std::vector<int>& out);
   double threshold(std::vector<double>& cache, double p, int dim);
+  /// Drops the re-entry pairings the test does not confirm from `chosen`.
+  void confirm_reentry_pairings(const AssociationView& map, const std::vector<Candidate>& candidates,
+                                const std::vector<Candidate>& wide, const std::vector<bool>& is_reentry,
+                                const Eigen::MatrixXd& widening, std::vector<int>& chosen);
 
   AssociationConfig config_;
   std::shared_ptr<Logger> log_;
@@ -254,7 +294,7 @@ class Associator {
   std::vector<int> in_range_, keys_;
   // Reused for every feature in range (J_of, J_os, A, A P, M and the
   // estimator rows) and every (feature, measurement) pair (the rest).
-  Eigen::MatrixXd scratch_J_of_, scratch_J_os_, scratch_A_, scratch_AP_, scratch_M_;
+  Eigen::MatrixXd scratch_J_of_, scratch_J_os_, scratch_A_, scratch_AP_, scratch_M_, scratch_M_wide_;
   std::vector<int> scratch_idx_;
   std::vector<double> scratch_far_;  ///< per measurement dimension: max(gate, new-feature threshold), this reading
   Innovation scratch_innovation_;

@@ -134,7 +134,9 @@ StoredMap Slam::snapshot_checkpoint(const std::filesystem::path& file) const {
   const AssociationStats& a = associator_.stats();
   run.put("association", row_of({static_cast<double>(a.jcbb_readings), static_cast<double>(a.jcbb_nodes),
                                  static_cast<double>(a.jcbb_bounded), static_cast<double>(a.index_queries),
-                                 static_cast<double>(a.ambiguous_readings), static_cast<double>(a.disputed_pairings)}));
+                                 static_cast<double>(a.ambiguous_readings), static_cast<double>(a.disputed_pairings),
+                                 static_cast<double>(a.reentry_readings), static_cast<double>(a.reentry_confirmed),
+                                 static_cast<double>(a.reentry_refused)}));
   for (std::size_t i = 0; i < health_.size(); ++i) health_[i].save(run, "health_" + std::to_string(i) + "_");
   covariance_health_.save(run, "covariance_health_");
   // Loop closing (slam_loop_closure.cpp): its history and counters, and per
@@ -327,11 +329,11 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     const Eigen::MatrixXd& counters = get_state(run, "counters", 1, 10, "run state");
     const Eigen::MatrixXd& seconds = get_state(run, "seconds", 1, 7, "run state");
     const Eigen::MatrixXd& nees = get_state(run, "nees", -1, 1, "run state");
-    // 4 counters, or 6 since association.refuse_ambiguous (2026-11-29).
+    // 4 counters, 6 since association.refuse_ambiguous (2026-11-29), 9 since reentry_joint_test (2026-12-07).
     const Eigen::MatrixXd& association = get_state(run, "association", 1, -1, "run state");
-    if (association.cols() != 4 && association.cols() != 6)
+    if (association.cols() != 4 && association.cols() != 6 && association.cols() != 9)
       throw std::invalid_argument("run state: association has " + std::to_string(association.cols()) +
-                                  " columns, expected 4 or 6");
+                                  " columns, expected 4, 6 or 9");
     // 31 entries; 14 in a checkpoint written before last_revisit_path_ was kept (then: the last anchor), 15 before
     // the closures confirmed by repeated searches were counted (then: none), 16 before the wider window's, 18
     // before relocalization by the scans (then: none, and not gathering).
@@ -440,9 +442,14 @@ void Slam::restore_checkpoint(const StoredMap& map, const std::filesystem::path&
     a.jcbb_nodes = integer_at(association, 1, 0, 1e15, "jcbb_nodes");
     a.jcbb_bounded = integer_at(association, 2, 0, 1e15, "jcbb_bounded");
     a.index_queries = integer_at(association, 3, 0, 1e15, "index_queries");
-    if (association.cols() == 6) {
+    if (association.cols() >= 6) {
       a.ambiguous_readings = integer_at(association, 4, 0, 1e15, "ambiguous_readings");
       a.disputed_pairings = integer_at(association, 5, 0, 1e15, "disputed_pairings");
+    }
+    if (association.cols() >= 9) {
+      a.reentry_readings = integer_at(association, 6, 0, 1e15, "reentry_readings");
+      a.reentry_confirmed = integer_at(association, 7, 0, 1e15, "reentry_confirmed");
+      a.reentry_refused = integer_at(association, 8, 0, 1e15, "reentry_refused");
     }
     s.loop_attempts = integer_at(loops, 3, 0, 1e15, "loop_attempts");
     s.loop_closures = integer_at(loops, 4, 0, 1e15, "loop_closures");

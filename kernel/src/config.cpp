@@ -39,6 +39,7 @@ const std::vector<std::string> kMapStarts = {"config", "map_end"};
 const std::vector<std::string> kSensorKeys = {"channel", "mount", "extractor", "feeds", "max_range", "silent_readings"};
 const std::vector<std::string> kAssociationKeys = {"gate_probability", "new_feature_probability", "tentative_max_age",
                                                    "join_distance", "method", "jcbb_max_nodes", "refuse_ambiguous",
+                                                   "reentry_joint_test", "reentry_covariance_scale",
                                                    "spatial_index", "index_cell_size", "loop_closing", "loop_local_path",
                                                    "loop_min_gap_path", "loop_drift_per_metre",
                                                    "loop_drift_deg_per_metre", "loop_min_matches",
@@ -530,6 +531,9 @@ AssociationConfig Reader::read_association(const Item* item) const {
                                                               : AssociationConfig::Method::NearestNeighbour;
   if (const Item* f = find(fields, "jcbb_max_nodes")) association.jcbb_max_nodes = integer(*f, 1);
   if (const Item* f = find(fields, "refuse_ambiguous")) association.refuse_ambiguous = boolean(*f);
+  if (const Item* f = find(fields, "reentry_joint_test")) association.reentry_joint_test = boolean(*f);
+  if (const Item* f = find(fields, "reentry_covariance_scale"))
+    association.reentry_covariance_scale = number(*f, 1.0, 100.0);
   if (const Item* f = find(fields, "spatial_index")) association.spatial_index = boolean(*f);
   if (const Item* f = find(fields, "index_cell_size")) association.index_cell_size = number(*f, 0.0);
   if (const Item* f = find(fields, "loop_closing")) association.loop_closing = boolean(*f);
@@ -552,6 +556,9 @@ AssociationConfig Reader::read_association(const Item* item) const {
       fail(*f, "needs loop_revisit_window: true (the wider window is reckoned from the travel since each old "
                "feature was last seen)");
   }
+  if (const Item* f = find(fields, "reentry_joint_test");
+      f != nullptr && association.reentry_joint_test && association.method != AssociationConfig::Method::Jcbb)
+    fail(*f, "needs method: jcbb (the test is a joint compatibility search)");
   return association;
 }
 
@@ -766,6 +773,9 @@ void emit_tail(YAML::Emitter& out, const RunConfig& c) {
   out << YAML::Key << "method" << YAML::Value << association_method_name(c.association.method);
   out << YAML::Key << "jcbb_max_nodes" << YAML::Value << std::to_string(c.association.jcbb_max_nodes);
   out << YAML::Key << "refuse_ambiguous" << YAML::Value << yes_no(c.association.refuse_ambiguous);
+  out << YAML::Key << "reentry_joint_test" << YAML::Value << yes_no(c.association.reentry_joint_test);
+  out << YAML::Key << "reentry_covariance_scale" << YAML::Value
+      << format_number(c.association.reentry_covariance_scale);
   out << YAML::Key << "spatial_index" << YAML::Value << yes_no(c.association.spatial_index);
   out << YAML::Key << "index_cell_size" << YAML::Value << format_number(c.association.index_cell_size);
   out << YAML::Key << "loop_closing" << YAML::Value << yes_no(c.association.loop_closing);

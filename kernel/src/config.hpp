@@ -99,6 +99,17 @@ struct AssociationConfig {
   /// disputed ones; they start no feature either). Without it JCBB takes the
   /// hypothesis with the smallest joint distance however close a rival is.
   bool refuse_ambiguous = false;
+  /// JCBB only: a pairing with a feature last seen over loop_min_gap_path
+  /// metres of travel ago (a re-entry: a loop closed by ordinary association)
+  /// is used only when, with the robot's covariance widened to
+  /// reentry_covariance_scale² Σ_r, the reading's re-entry measurements
+  /// jointly pick that pairing and no rival hypothesis with as many pairings
+  /// leaves it out (association.hpp, confirm_reentries). Refused pairings
+  /// update nothing and start no feature; the loop closer may still close
+  /// the loop.
+  bool reentry_joint_test = false;
+  /// The re-entry test's widening of the robot's standard deviations (≥ 1).
+  double reentry_covariance_scale = 2.0;
   /// Sensors with a max_range look their features up in a uniform grid over
   /// the features' planar bounding boxes instead of scanning the whole map
   /// (same result); false scans everything.

@@ -420,6 +420,13 @@ void write_summary_yaml(const std::filesystem::path& file, const RunSummary& s, 
     y << YAML::Key << "ambiguous_readings" << YAML::Value << as.ambiguous_readings;
     y << YAML::Key << "disputed_pairings" << YAML::Value << as.disputed_pairings;
   }
+  if (slam.config().association.reentry_joint_test) {
+    y << YAML::Key << "reentry_test" << YAML::Value << YAML::BeginMap;
+    y << YAML::Key << "readings" << YAML::Value << as.reentry_readings;
+    y << YAML::Key << "confirmed" << YAML::Value << as.reentry_confirmed;
+    y << YAML::Key << "refused" << YAML::Value << as.reentry_refused;
+    y << YAML::EndMap;
+  }
   if (slam.config().association.loop_closing) {
     y << YAML::Key << "loop_closing" << YAML::Value << YAML::BeginMap;
     y << YAML::Key << "searches" << YAML::Value << st.loop_attempts;
@@ -627,6 +634,9 @@ std::string format_summary(const RunSummary& s, const Slam& slam) {
                      " readings not used: a rival hypothesis fitted as well"
                : std::string())
        << "\n";
+  if (slam.config().association.reentry_joint_test)
+    os << "  re-entry test: " << as.reentry_confirmed << " pairings with long-unseen features confirmed, "
+       << as.reentry_refused << " refused (" << as.reentry_readings << " readings)\n";
   if (slam.config().association.loop_closing)
     os << "  loop closing by map matching: " << st.loop_closures << " closures (" << st.loop_merged
        << " features merged) in " << st.loop_attempts << " searches, " << st.loop_ambiguous

@@ -480,8 +480,10 @@ void Slam::associate(const SensorSlot& sensor, int sensor_index, const std::vect
                      ReadingWork& work) {
   Mat6 J_sr;
   const Pose6 x_ms = compound(x_r_, sensor.config.mount, &J_sr);  // eq. 17
-  const AssociationView map{features_, types_, [this](const std::vector<int>& rows) { return state_covariance(rows); },
-                            robot_idx_, step_};
+  AssociationView map{features_, types_, [this](const std::vector<int>& rows) { return state_covariance(rows); },
+                      robot_idx_, step_, {}};
+  if (config_.association.reentry_joint_test)
+    map.travel_unseen = [this](const MapFeature& mf) { return path_distance_ - mf.last_seen_path; };
   AssociationResult result = associator_.associate(map, sensor, x_ms, columns(J_sr, dofs_), meas);
   for (Candidate& c : result.matches) {
     Match match;

@@ -442,4 +442,79 @@ TEST(JcbbRivals, ABoundedRivalSearchDisputesEverything) {
   EXPECT_EQ(cut.disputed.size(), static_cast<std::size_t>(n));
 }
 
+// ---- Re-entries (association.reentry_joint_test) ---------------------------
+
+TEST(Reentry, WideningAddsVarianceAtTheRobotRowsOnly) {
+  const World w(2, 0.1, 0.2);
+  Eigen::Matrix2d extra;
+  extra << 0.5, 0.2, 0.2, 0.7;
+  const MarginalFn wide = widen_robot(w.marginal(), {0, 1}, extra);
+  const std::vector<int> rows = {4, 1, 2, 0};  // the robot's rows anywhere among the asked ones
+  const Eigen::MatrixXd before = w.marginal()(rows), after = wide(rows);
+  Eigen::MatrixXd expected = before;
+  expected(1, 1) += 0.7;
+  expected(3, 3) += 0.5;
+  expected(1, 3) += 0.2;
+  expected(3, 1) += 0.2;
+  EXPECT_TRUE(after.isApprox(expected)) << after;
+  EXPECT_TRUE(widen_robot(w.marginal(), {0, 1}, extra)({2, 3}).isApprox(w.marginal()({2, 3}))) << "no robot row asked";
+  EXPECT_THROW(widen_robot(w.marginal(), {0, 1}, Eigen::Matrix3d::Identity()), std::invalid_argument);
+}
+
+/// The candidates of measurements of `seen` posts, displaced by `offset` from
+/// where the estimate puts them, that pass the 99 % gate of `w`.
+std::vector<Candidate> gated(const World& w, const std::vector<Eigen::Vector2d>& posts, const std::vector<int>& seen,
+                             const Eigen::Vector2d& offset) {
+  std::vector<Candidate> out;
+  for (std::size_t m = 0; m < seen.size(); ++m)
+    for (std::size_t j = 0; j < posts.size(); ++j) {
+      const Candidate c = w.candidate(static_cast<int>(m), static_cast<int>(j),
+                                      posts[static_cast<std::size_t>(seen[m])] + offset - posts[j]);
+      if (c.d2 <= chi2_quantile(0.99, 2)) out.push_back(c);
+    }
+  return out;
+}
+
+// A row of posts 1 m apart, revisited after a drift of 0.95 m along it that
+// the filter's 5 cm does not hold: its gate admits only the posts one
+// further on (a wrong re-entry, which plain JCBB makes). Widened by a drift
+// of 0.6 m, the true and the shifted hypotheses both fit: not confirmed.
+TEST(Reentry, AShiftAlongARepeatedStructureIsNotConfirmed) {
+  const World filter(3, 0.05, 0.01);
+  const std::vector<Eigen::Vector2d> posts = {{0.0, 0.0}, {1.0, 0.0}, {2.0, 0.0}};
+  const Eigen::Vector2d drift(-0.95, 0.0);  // the robot sees posts 1 and 2 where the estimate puts 0 and 1
+  const std::vector<Candidate> narrow = gated(filter, posts, {1, 2}, drift);
+  const JcbbResult chosen = joint_compatibility(narrow, filter.marginal(), {0.99, 1000});
+  ASSERT_EQ(pairs(narrow, chosen.chosen), (std::vector<std::pair<int, int>>{{0, 0}, {1, 1}}))
+      << "the filter's gate makes the wrong pairings";
+
+  World wide = filter;
+  wide.P.topLeftCorner(2, 2) += Eigen::Matrix2d::Identity() * 0.36;
+  const std::vector<Candidate> candidates = gated(wide, posts, {1, 2}, drift);
+  const ReentryVerdict v = confirm_reentries(candidates, {{0, 0}, {1, 1}},
+                                             widen_robot(filter.marginal(), {0, 1}, Eigen::Matrix2d::Identity() * 0.36),
+                                             {0.99, 1000});
+  EXPECT_EQ(v.confirmed, (std::vector<bool>{false, false}));
+  EXPECT_FALSE(v.search.rivals_bounded);
+  EXPECT_EQ(v.search.disputed.size(), 2u) << "a rival hypothesis pairs both measurements otherwise";
+}
+
+// Three posts no shift maps onto each other, revisited with a 0.3 m drift:
+// the filter (0.2 m) pairs them rightly, and widened by 0.6 m the only
+// hypothesis with three pairings is the same — confirmed. A pairing the
+// widened best does not make is not confirmed either.
+TEST(Reentry, AnUnambiguousRevisitIsConfirmed) {
+  const World filter(3, 0.2, 0.01);
+  const std::vector<Eigen::Vector2d> posts = {{0.0, 0.0}, {1.0, 0.0}, {3.0, 2.0}};
+  const Eigen::Vector2d drift(0.3, -0.1);
+  const MarginalFn widened = widen_robot(filter.marginal(), {0, 1}, Eigen::Matrix2d::Identity() * 0.36);
+  World wide = filter;
+  wide.P.topLeftCorner(2, 2) += Eigen::Matrix2d::Identity() * 0.36;
+  const std::vector<Candidate> candidates = gated(wide, posts, {0, 1, 2}, drift);
+  ASSERT_GT(candidates.size(), 3u) << "the widened gate admits shifted pairs too";
+  const ReentryVerdict v = confirm_reentries(candidates, {{0, 0}, {1, 1}, {2, 2}, {0, 1}}, widened, {0.99, 1000});
+  EXPECT_EQ(v.confirmed, (std::vector<bool>{true, true, true, false}));
+  EXPECT_TRUE(v.search.disputed.empty());
+}
+
 }  // namespace

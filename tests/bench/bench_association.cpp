@@ -199,7 +199,8 @@ void associate_reading(benchmark::State& state, bool indexed) {
   Associator associator(config, {scene.sensor.config}, scene.log);
   associator.sync(scene.features);
   const AssociationView map{scene.features, scene.types,
-                            [&](const std::vector<int>& rows) { return scene.estimator.marginal(rows); }, scene.robot_idx, 0};
+                            [&](const std::vector<int>& rows) { return scene.estimator.marginal(rows); }, scene.robot_idx, 0,
+                            {}};
   std::size_t matched = 0;
   for (auto _ : state) {
     const AssociationResult r = associator.associate(map, scene.sensor, scene.x_ms, scene.J_sr, scene.reading);

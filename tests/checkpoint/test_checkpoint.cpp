@@ -326,6 +326,16 @@ TEST(Checkpoint, IntelEkf) {
   expect_resume_equals_uninterrupted({"intel_walls.yaml", "ekf", 300, 600, {}});
 }
 
+// The re-entry test (association.reentry_joint_test) counts its verdicts; on
+// Intel it refuses re-entries on both sides of step 450 (measured 2026-12-07,
+// debug log).
+TEST(Checkpoint, IntelSmootherWithTheReentryTest) {
+  if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
+  expect_resume_equals_uninterrupted({"intel_walls.yaml", "smoother", 450, 800, [](RunConfig& c) {
+                                        c.association.reentry_joint_test = true;
+                                      }});
+}
+
 TEST(Checkpoint, IntelCekf) {
   if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
   expect_resume_equals_uninterrupted({"intel_walls.yaml", "cekf", 300, 600, {}});

@@ -292,6 +292,26 @@ TEST(Config, AssociationMethodAndIndexKeys) {
   EXPECT_EQ(again.association.index_cell_size, 2.5);
 }
 
+// The re-entry test is a joint compatibility search: asked for under nearest
+// neighbour, the key is named; its scale round-trips through the effective
+// configuration and is at least 1.
+TEST(Config, TheReentryTestNeedsJointCompatibility) {
+  EXPECT_EQ(config_error(kBase + "association:\n  reentry_joint_test: true\n"),
+            "test.yaml:22:23: association.reentry_joint_test: needs method: jcbb (the test is a joint compatibility "
+            "search)");
+  EXPECT_EQ(config_error(kBase + "association:\n  method: jcbb\n  reentry_covariance_scale: 0.5\n"),
+            "test.yaml:23:29: association.reentry_covariance_scale: 0.5 is out of range [1, 100]");
+  const RunConfig c =
+      parse(kBase + "association:\n  method: jcbb\n  reentry_joint_test: true\n  reentry_covariance_scale: 3\n");
+  EXPECT_TRUE(c.association.reentry_joint_test);
+  EXPECT_EQ(c.association.reentry_covariance_scale, 3.0);
+  const RunConfig again = parse(mspace::kernel::effective_config_yaml(c));
+  EXPECT_TRUE(again.association.reentry_joint_test);
+  EXPECT_EQ(again.association.reentry_covariance_scale, 3.0);
+  EXPECT_FALSE(parse(kBase).association.reentry_joint_test);  // off by default
+  EXPECT_EQ(parse(kBase).association.reentry_covariance_scale, 2.0);
+}
+
 // The wider second search is reckoned from the travel since each old feature
 // was last seen, which only loop_revisit_window keeps: asked for without it,
 // the key is named (not silently ignored).
