@@ -761,8 +761,9 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
         guarded(type.instance, *type.library, "gating_covariance", [&] { return f.gating_covariance(); });
     if (gate_cov.size() > 0) M += J_of * gate_cov * J_of.transpose();
     feature_product_.valid = false;  // M is this feature's
-    // A re-entry (association.reentry_joint_test): M once more with the
-    // robot's covariance widened, A (scale² Σ_r ...) Aᵀ, for the wide gate.
+    // A re-entry (association.reentry_joint_test): for the wide gate, M with
+    // the robot's covariance Σ_r taken as scale² Σ_r,
+    //   M_wide = M + A_r (scale² − 1) Σ_r A_rᵀ,  A_r = A's robot columns.
     const bool reentering = reentry_test && dim > 0 && map.travel_unseen(mf) > ac.loop_min_gap_path;
     if (reentering) {
       if (widening.size() == 0)
@@ -797,7 +798,7 @@ AssociationResult Associator::associate(const AssociationView& map, const Sensor
       const double far = far_threshold(mi_dim);
       if (reentering) {
         // The wide gate first: it admits every pair the filter's gate does.
-        Eigen::MatrixXd S_wide = in.J_eta_o * scratch_M_wide_ * in.J_eta_o.transpose() + C_eta;
+        const Eigen::MatrixXd S_wide = in.J_eta_o * scratch_M_wide_ * in.J_eta_o.transpose() + C_eta;
         if (!tracing && in.eta.squaredNorm() > far * S_wide.trace()) continue;
         const Eigen::LDLT<Eigen::MatrixXd> wide_ldlt(S_wide);
         const double d2_wide = wide_ldlt.info() == Eigen::Success ? in.eta.dot(wide_ldlt.solve(in.eta)) : kInf;
