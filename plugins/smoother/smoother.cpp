@@ -201,8 +201,9 @@ Smoother::Smoother(SmootherOptions options, Logger* log)
 }
 
 Smoother::Filter Smoother::make_filter() const {
-  if (o_.running_filter == RunningFilter::Ekf) return Filter(std::in_place_type<ekf::EkfFilter>, o_.initial_capacity);
-  return Filter(std::in_place_type<cekf::CekfFilter>, o_.max_active, o_.keep_steps);
+  if (o_.running_filter == RunningFilter::Ekf)
+    return Filter(std::in_place_type<ekf::EkfFilter>, o_.initial_capacity, o_.observability_constrained);
+  return Filter(std::in_place_type<cekf::CekfFilter>, o_.max_active, o_.keep_steps, o_.observability_constrained);
 }
 
 const Estimator& Smoother::running() const {

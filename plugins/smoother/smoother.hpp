@@ -76,6 +76,13 @@ struct SmootherOptions {
   RunningFilter running_filter = RunningFilter::Cekf;
   int max_active = cekf::CekfFilter::kDefaultMaxActive;  ///< running_filter cekf
   int keep_steps = cekf::CekfFilter::kDefaultKeepSteps;  ///< running_filter cekf
+  /// The running filter in observability-constrained mode (Huang, Mourikis &
+  /// Roumeliotis, IJRR 2010; mspace/ekf_filter.hpp): its updates between
+  /// optimisations gain no information along a global rigid motion, so the
+  /// covariance it gates with does not shrink where nothing was observed.
+  /// The optimisation itself is unchanged (its marginal is re-set as before;
+  /// the unobservable directions are carried on through it).
+  bool observability_constrained = false;
   /// Estimate the motion and observation factors' noise scales from the
   /// residuals at each optimisation (variance components,
   /// variance_components.hpp) and use them from then on, in the optimisation
@@ -120,6 +127,8 @@ class Smoother final : public Estimator {
     return running().cross(rows, cols);
   }
   void remove(std::vector<int> idx) override;
+  /// Passed to the running filter (used in observability-constrained mode).
+  void set_unobservable(const Eigen::MatrixXd& U_r) override { running().set_unobservable(U_r); }
 
   /// Checkpoints: the running EKF (as `ekf` saves it) and the triggers'
   /// bookkeeping; the kernel saves the nonlinear problem beside it.

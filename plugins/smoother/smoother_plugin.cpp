@@ -28,6 +28,7 @@ std::unique_ptr<mspace::PluginObject> make_smoother(const mspace::PluginArgs& ar
   o.running_filter = args.params.get_string("running_filter") == "ekf" ? RunningFilter::Ekf : RunningFilter::Cekf;
   o.max_active = static_cast<int>(args.params.get_int("max_active"));
   o.keep_steps = static_cast<int>(args.params.get_int("keep_steps"));
+  o.observability_constrained = args.params.get_bool("observability_constrained");
   o.noise_estimation = args.params.get_string("noise_estimation") == "variance_components";
   o.noise_iterations = static_cast<int>(args.params.get_int("noise_iterations"));
   o.noise_tolerance = args.params.get_double("noise_tolerance");
@@ -81,6 +82,10 @@ mspace::PluginDescriptor describe() {
                         "running_filter cekf: rows touched within this many updates stay active (as the cekf "
                         "plugin's)",
                         0, 1'000'000),
+      mspace::param_bool("observability_constrained", def.observability_constrained,
+                         "the running filter in observability-constrained mode (Huang, Mourikis & Roumeliotis, "
+                         "IJRR 2010; as the ekf plugin's): its updates between optimisations gain no information "
+                         "along a global rigid motion of robot and map"),
       mspace::param_string("noise_estimation", "none",
                            "variance_components: estimate the motion and the observation factors' noise scales from "
                            "the residuals at each optimisation (iterated variance-component estimation) and use them "

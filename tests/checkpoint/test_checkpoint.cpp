@@ -219,9 +219,9 @@ TEST(Checkpoint, SimPointsEkf) { expect_resume_equals_uninterrupted({"sim_points
 TEST(Checkpoint, SimPointsCekf) { expect_resume_equals_uninterrupted({"sim_points.yaml", "cekf", 1500, 3000, {}}); }
 
 // The observability-constrained mode carries the unobservable directions U:
-// they are part of the saved state.
-TEST(Checkpoint, SimPointsObservabilityConstrainedEkfAndCekf) {
-  for (const char* estimator : {"ekf", "cekf"}) {
+// they are part of the saved state (the smoother's: its running filter's).
+TEST(Checkpoint, SimPointsObservabilityConstrainedEveryEstimator) {
+  for (const char* estimator : {"ekf", "cekf", "smoother"}) {
     SCOPED_TRACE(estimator);
     expect_resume_equals_uninterrupted({"sim_points.yaml", estimator, 700, 1400, [](RunConfig& c) {
                                           c.estimator.params.set("observability_constrained", true);
@@ -345,6 +345,15 @@ TEST(Checkpoint, IntelCekf) {
 TEST(Checkpoint, IntelSmoother) {
   if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
   expect_resume_equals_uninterrupted({"intel_walls.yaml", "smoother", 300, 600, {}});
+}
+
+// The smoother's running filter (ekf in intel_walls.yaml) observability-
+// constrained: U is saved with it and carried on after the resume.
+TEST(Checkpoint, IntelSmootherObservabilityConstrained) {
+  if (!have_intel()) GTEST_SKIP() << "Intel Research Lab data not found in " << datasets() / "intel_lab";
+  expect_resume_equals_uninterrupted({"intel_walls.yaml", "smoother", 300, 600, [](RunConfig& c) {
+                                        c.estimator.params.set("observability_constrained", true);
+                                      }});
 }
 
 // problem.freeze_in_sensor_frame: frozen factors kept in their sensor's

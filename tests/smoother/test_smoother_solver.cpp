@@ -13,6 +13,8 @@
 
 #include <Eigen/Dense>
 
+#include "mspace/cekf_filter.hpp"
+#include "mspace/ekf_filter.hpp"
 #include "mspace/problem.hpp"
 #include "smoother.hpp"
 
@@ -174,6 +176,80 @@ TEST(SmootherSolver, HuberLossResistsAGrossOutlier) {
   }
   std::cout << "outlier: error least squares " << err[0] << ", Huber " << err[1] << "\n";
   EXPECT_LT(err[1], 0.2 * err[0]);
+}
+
+
+// The running filter in observability-constrained mode (SmootherOptions::
+// observability_constrained): between optimisations the smoother is the
+// constrained filter of the ekf and cekf plugins — the same δx and covariance
+// for the same calls — its updates add no information along the unobservable
+// directions U, and it stays so after an optimisation re-set its covariance.
+TEST(SmootherObservabilityConstrained, TheRunningFilterIsTheConstrainedFilter) {
+  // Global planar motion of a robot at (x, y): translation along x, along y,
+  // rotation about the origin.
+  const auto global_motion = [](double x, double y) { return Eigen::MatrixXd{{1, 0, -y}, {0, 1, x}, {0, 0, 1}}; };
+  const Eigen::MatrixXd P0{{0.3, 0.02, 0.0}, {0.02, 0.2, 0.01}, {0.0, 0.01, 0.1}};
+  const Eigen::MatrixXd J_rr{{1, 0, 0.1}, {0, 1, 0.4}, {0, 0, 1}};  // a step that moves the robot by (0.4, −0.1)
+  // A point seen from the robot (rows of x, y, θ), then 6 more map rows.
+  const StateAugmentation point{{0, 1, 2}, Eigen::MatrixXd{{1, 0, -0.8}, {0, 1, 1.5}}, 0.05 * Eigen::MatrixXd::Identity(2, 2)};
+  StateAugmentation rest;
+  rest.J = Eigen::MatrixXd::Zero(6, 0);
+  rest.C_new = Eigen::MatrixXd::Identity(6, 6);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> g(0.0, 1.0);
+  Eigen::MatrixXd J_obs(2, 5);
+  for (Eigen::Index i = 0; i < J_obs.size(); ++i) J_obs.data()[i] = g(rng);
+  const LinearizedObservation obs{Eigen::VectorXd{{0.3, -0.2}}, Eigen::MatrixXd{{0.05, 0.01}, {0.01, 0.04}},
+                                  {0, 1, 2, 3, 4}, J_obs};
+  const auto exercise = [&](Estimator& f) {
+    f.reset(P0);
+    f.set_unobservable(global_motion(1.0, 2.0));
+    f.predict(J_rr, 0.01 * Eigen::MatrixXd::Identity(3, 3));
+    f.augment(point);
+    f.augment(rest);
+    return Eigen::VectorXd(f.update({obs}));
+  };
+  for (const smoother::RunningFilter kind : {smoother::RunningFilter::Ekf, smoother::RunningFilter::Cekf}) {
+    SCOPED_TRACE(kind == smoother::RunningFilter::Ekf ? "running_filter ekf" : "running_filter cekf");
+    smoother::SmootherOptions o;
+    o.running_filter = kind;
+    o.observability_constrained = true;
+    smoother::Smoother constrained(o);
+    o.observability_constrained = false;
+    smoother::Smoother plain(o);
+    ekf::EkfFilter ekf_constrained(4, true);
+    cekf::CekfFilter cekf_constrained(cekf::CekfFilter::kDefaultMaxActive, cekf::CekfFilter::kDefaultKeepSteps, true);
+    Estimator& reference = kind == smoother::RunningFilter::Ekf ? static_cast<Estimator&>(ekf_constrained)
+                                                                : static_cast<Estimator&>(cekf_constrained);
+    const Eigen::VectorXd dx = exercise(constrained);
+    const Eigen::VectorXd dx_reference = exercise(reference);
+    const Eigen::VectorXd dx_plain = exercise(plain);
+    std::vector<int> all(static_cast<std::size_t>(constrained.dim()));
+    for (int i = 0; i < constrained.dim(); ++i) all[static_cast<std::size_t>(i)] = i;
+    EXPECT_LT((dx - dx_reference).lpNorm<Eigen::Infinity>(), 1e-12);
+    EXPECT_LT((constrained.marginal(all) - reference.marginal(all)).lpNorm<Eigen::Infinity>(), 1e-12);
+    EXPECT_GT((dx - dx_plain).lpNorm<Eigen::Infinity>(), 1e-3);  // the constraint does something
+
+    // Robot rows: the global motion at (1.4, 1.9) after the step; the point's:
+    // J of its augmentation times the robot's.
+    const Eigen::MatrixXd U_r = global_motion(1.4, 1.9);
+    Eigen::MatrixXd U = Eigen::MatrixXd::Zero(constrained.dim(), 3);
+    U.topRows(3) = U_r;
+    U.middleRows(3, 2) = point.J * U_r;
+
+    // The next update (another Jacobian) adds no information along U, and
+    // neither does one after an optimisation has re-set the covariance.
+    const auto information_along_U = [&](Estimator& f) {
+      const Eigen::MatrixXd before = f.marginal(all).inverse();
+      f.update({LinearizedObservation{obs.eta, obs.C_eta, obs.idx, J_obs.rowwise().reverse()}});
+      return Eigen::MatrixXd(U.transpose() * (f.marginal(all).inverse() - before) * U);
+    };
+    EXPECT_LT(information_along_U(constrained).cwiseAbs().maxCoeff(), 1e-8);
+    EXPECT_GT(information_along_U(plain).cwiseAbs().maxCoeff(), 1e-2);
+    LinearProblem problem(3, constrained.dim() - 3, 20, 9);
+    constrained.optimise(problem);
+    EXPECT_LT(information_along_U(constrained).cwiseAbs().maxCoeff(), 1e-8);
+  }
 }
 
 }  // namespace
