@@ -960,10 +960,22 @@ void apply_override(YAML::Node& root, const std::string& assignment) {
   path.back()[parts.back()] = value;
 }
 
+/// --estimator: the estimator section becomes `plugin` with its defaults
+/// unless it already names that plugin (load_config).
+void replace_estimator_section(YAML::Node& root, const std::string& plugin) {
+  if (!root.IsMap()) return;  // the reader reports what is wrong with it
+  const YAML::Node section = root["estimator"];
+  if (section.IsMap() && section["plugin"].IsScalar() && section["plugin"].Scalar() == plugin) return;
+  YAML::Node replacement(YAML::NodeType::Map);
+  replacement["plugin"] = plugin;
+  root["estimator"] = replacement;
+}
+
 }  // namespace
 
 RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry,
-                       const std::vector<std::string>& overrides, bool map_from_command_line) {
+                       const std::vector<std::string>& overrides, bool map_from_command_line,
+                       const std::string& estimator_plugin) {
   YAML::Node root;
   try {
     root = YAML::Load(text);
@@ -971,12 +983,14 @@ RunConfig parse_config(const std::string& text, const std::string& file_name_for
     throw ConfigError(file_name_for_messages + ":" + std::to_string(e.mark.line + 1) + ":" +
                       std::to_string(e.mark.column + 1) + ": YAML syntax error: " + e.msg);
   }
+  if (!estimator_plugin.empty()) replace_estimator_section(root, estimator_plugin);
   for (const std::string& o : overrides) apply_override(root, o);
   return Reader(file_name_for_messages, registry, overrides, map_from_command_line).read_document(root);
 }
 
 RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry,
-                      const std::vector<std::string>& overrides, bool map_from_command_line) {
+                      const std::vector<std::string>& overrides, bool map_from_command_line,
+                      const std::string& estimator_plugin) {
   std::error_code ec;
   const auto status = std::filesystem::status(file, ec);
   if (!std::filesystem::exists(status)) throw ConfigError(file.string() + ": no such file");
@@ -986,11 +1000,12 @@ RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registr
   if (!in) throw ConfigError(file.string() + ": cannot read the configuration file (permissions?)");
   std::ostringstream text;
   text << in.rdbuf();
-  return parse_config(text.str(), file.string(), registry, overrides, map_from_command_line);
+  return parse_config(text.str(), file.string(), registry, overrides, map_from_command_line, estimator_plugin);
 }
 
-void override_estimator(RunConfig& config, const std::string& plugin, PluginRegistry& registry) {
-  if (config.estimator.plugin == plugin) return;
+namespace {
+
+std::shared_ptr<const LoadedPlugin> load_estimator_plugin(const std::string& plugin, PluginRegistry& registry) {
   std::shared_ptr<const LoadedPlugin> loaded;
   try {
     loaded = registry.load(plugin);
@@ -1000,6 +1015,18 @@ void override_estimator(RunConfig& config, const std::string& plugin, PluginRegi
   if (loaded->descriptor->kind != PluginKind::Estimator)
     throw ConfigError(std::string("--estimator ") + plugin + ": " +
                       kind_mismatch_message(plugin, loaded->descriptor->kind, PluginKind::Estimator));
+  return loaded;
+}
+
+}  // namespace
+
+void check_estimator_plugin(const std::string& plugin, PluginRegistry& registry) {
+  load_estimator_plugin(plugin, registry);
+}
+
+void override_estimator(RunConfig& config, const std::string& plugin, PluginRegistry& registry) {
+  if (config.estimator.plugin == plugin) return;
+  const std::shared_ptr<const LoadedPlugin> loaded = load_estimator_plugin(plugin, registry);
   config.estimator.plugin = plugin;
   config.estimator.params = Params::defaults(loaded->descriptor->params);
   config.estimator.where = "--estimator";

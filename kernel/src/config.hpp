@@ -291,13 +291,20 @@ struct RunConfig {
 /// after reading (resolve_run_request); the map section's consistency (a mode
 /// without a map to load, start: map_end, initial_pose: search) is then
 /// checked there, with the command line's values, instead of here.
+/// `estimator_plugin` (the command line's --estimator, checked with
+/// check_estimator_plugin first): when the file's estimator is another
+/// plugin, its section is replaced by that plugin with its own defaults
+/// before `overrides` apply, so that --set estimator.KEY=VALUE sets the chosen
+/// plugin's KEY (as override_estimator after reading, which would drop it).
 RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry,
-                      const std::vector<std::string>& overrides = {}, bool map_from_command_line = false);
+                      const std::vector<std::string>& overrides = {}, bool map_from_command_line = false,
+                      const std::string& estimator_plugin = {});
 
 /// Same, from text; `file_name_for_messages` prefixes every error message and
 /// its stem is the default run name.
 RunConfig parse_config(const std::string& text, const std::string& file_name_for_messages, PluginRegistry& registry,
-                       const std::vector<std::string>& overrides = {}, bool map_from_command_line = false);
+                       const std::vector<std::string>& overrides = {}, bool map_from_command_line = false,
+                       const std::string& estimator_plugin = {});
 
 /// The fully resolved configuration (every parameter with its effective value)
 /// as YAML text in the run-file layout; parse_config accepts it back.
@@ -313,6 +320,10 @@ std::string effective_config_yaml(const RunConfig& config);
 /// max_active does not follow a switch to ekf). ConfigError for an unknown
 /// plugin or one that is not an estimator, naming the known ones.
 void override_estimator(RunConfig& config, const std::string& plugin, PluginRegistry& registry);
+
+/// Loads `plugin` and checks that it is an estimator: ConfigError "--estimator
+/// NAME: …" otherwise (unknown plugin, naming the known ones; another kind).
+void check_estimator_plugin(const std::string& plugin, PluginRegistry& registry);
 
 /// Expands ${VAR} and ${VAR:-default} (default used when VAR is unset or
 /// empty). Throws std::invalid_argument for an unset variable without default

@@ -234,7 +234,7 @@ int main(int argc, char** argv) {
   run->add_option("--seed", run_cmd.seed, "seed for every plugin with a `seed` parameter (overrides run.seed)");
   run->add_option("--estimator", run_cmd.estimator,
                   "run this estimator plugin instead of the configuration's (e.g. ekf, cekf, smoother), with its "
-                  "own default options");
+                  "own default options; --set estimator.KEY=VALUE sets its keys");
   run->add_option("--checkpoint-every", run_cmd.checkpoint_every,
                   "write <out>/checkpoint/ every N steps, replacing the previous one atomically (overrides "
                   "run.checkpoint_every; 0 = none)")

@@ -55,9 +55,23 @@ void apply_frames_option(RunConfig& config, long long every) {
 
 RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
   const bool map_given = !r.map.empty() || !r.mode.empty();  // apply_map_request checks the map section then
-  RunConfig config = r.config_file.empty()
-                         ? parse_config(default_config_text(), default_config_name(), registry, r.sets, map_given)
-                         : load_config(r.config_file, registry, r.sets, map_given);
+  const auto read = [&](const std::vector<std::string>& sets, const std::string& estimator) {
+    return r.config_file.empty()
+               ? parse_config(default_config_text(), default_config_name(), registry, sets, map_given, estimator)
+               : load_config(r.config_file, registry, sets, map_given, estimator);
+  };
+  if (!r.estimator.empty()) {
+    // --estimator goes in before the --set overrides, so that --set
+    // estimator.KEY=VALUE sets a key of the estimator the run will use. The
+    // plugin is checked first (with the file's plugin_path), so that a wrong
+    // name is reported as the --estimator's.
+    std::vector<std::string> others;
+    for (const std::string& set : r.sets)
+      if (set.rfind("estimator.", 0) != 0) others.push_back(set);
+    for (const auto& dir : read(others, {}).plugin_path) registry.add_search_dir(dir);
+    check_estimator_plugin(r.estimator, registry);
+  }
+  RunConfig config = read(r.sets, r.estimator);
   for (const auto& dir : config.plugin_path) registry.add_search_dir(dir);
   set_log_level(parse_log_level(r.log_level.empty() ? config.log_level : r.log_level));
   if (!r.output_dir.empty()) config.output.dir = r.output_dir;
@@ -65,7 +79,6 @@ RunConfig resolve_run_request(const RunRequest& r, PluginRegistry& registry) {
   if (r.checkpoint_every) config.checkpoint_every = *r.checkpoint_every;
   if (r.frames) apply_frames_option(config, *r.frames);
   if (r.seed) config.seed = *r.seed;
-  if (!r.estimator.empty()) override_estimator(config, r.estimator, registry);
   apply_run_seed(config);
   if (r.seed) warn_if_nothing_seeded(config);
   apply_map_request(config, r);

@@ -28,6 +28,7 @@
 #include "config.hpp"
 #include "logging.hpp"
 #include "plugin_registry.hpp"
+#include "run_request.hpp"
 #include "runner.hpp"
 #include "slam.hpp"
 
@@ -420,6 +421,50 @@ TEST_F(SimRun, EstimatorOverrideKeepsEachEstimatorsOwnOptions) {
   try {
     RunConfig wrong = c;
     override_estimator(wrong, "point", registry_);
+    ADD_FAILURE() << "a feature plugin was accepted as the estimator";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("--estimator point: plugin 'point' is a feature"), std::string::npos)
+        << e.what();
+  }
+}
+
+// `--estimator smoother --set estimator.KEY=VALUE` (resolve_run_request, as
+// `mspace run` does): the --set applies to the estimator the run uses. Before,
+// --estimator replaced the section after the --set had gone to the file's
+// estimator, and a key the two plugins share was dropped without a word.
+TEST_F(SimRun, SetOverridesApplyToTheEstimatorChosenOnTheCommandLine) {
+  RunRequest request;
+  request.config_file = kConfig.string();
+  request.estimator = "smoother";
+  request.sets = {"estimator.observability_constrained=true", "estimator.period=40"};
+  const RunConfig chosen = resolve_run_request(request, registry_);
+  EXPECT_EQ(chosen.estimator.plugin, "smoother");
+  EXPECT_TRUE(chosen.estimator.params.get_bool("observability_constrained"));
+  EXPECT_EQ(chosen.estimator.params.get_int("period"), 40);
+  EXPECT_EQ(chosen.estimator.params.get_string("running_filter"), "cekf");  // the smoother's own default
+
+  // A key the chosen plugin does not have is refused, naming it and the --set.
+  request.sets = {"estimator.max_active=10"};
+  request.estimator = "ekf";
+  try {
+    resolve_run_request(request, registry_);
+    ADD_FAILURE() << "a cekf key was accepted for the ekf";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("--set estimator.max_active=10: estimator.max_active: unknown parameter of "
+                                         "plugin 'ekf'"),
+              std::string::npos)
+        << e.what();
+  }
+  // The same plugin as the file's keeps the file's options, with the --set on top.
+  request.estimator = "ekf";
+  request.sets = {"estimator.initial_capacity=10"};
+  const RunConfig same = resolve_run_request(request, registry_);
+  EXPECT_EQ(same.estimator.params.get_int("initial_capacity"), 10);
+  // A wrong name is still the --estimator's error.
+  request.estimator = "point";
+  request.sets = {};
+  try {
+    resolve_run_request(request, registry_);
     ADD_FAILURE() << "a feature plugin was accepted as the estimator";
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("--estimator point: plugin 'point' is a feature"), std::string::npos)
