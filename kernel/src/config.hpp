@@ -294,8 +294,9 @@ struct RunConfig {
 /// `estimator_plugin` (the command line's --estimator, checked with
 /// check_estimator_plugin first): when the file's estimator is another
 /// plugin, its section is replaced by that plugin with its own defaults
-/// before `overrides` apply, so that --set estimator.KEY=VALUE sets the chosen
-/// plugin's KEY (as override_estimator after reading, which would drop it).
+/// before `overrides` apply, so that --set estimator.KEY=VALUE sets a key of
+/// the chosen plugin (override_estimator, applied after reading, would drop
+/// such a key with the file's section).
 RunConfig load_config(const std::filesystem::path& file, PluginRegistry& registry,
                       const std::vector<std::string>& overrides = {}, bool map_from_command_line = false,
                       const std::string& estimator_plugin = {});

@@ -78,10 +78,11 @@ struct SmootherOptions {
   int keep_steps = cekf::CekfFilter::kDefaultKeepSteps;  ///< running_filter cekf
   /// The running filter in observability-constrained mode (Huang, Mourikis &
   /// Roumeliotis, IJRR 2010; mspace/ekf_filter.hpp): its updates between
-  /// optimisations gain no information along a global rigid motion, so the
-  /// covariance it gates with does not shrink where nothing was observed.
-  /// The optimisation itself is unchanged (its marginal is re-set as before;
-  /// the unobservable directions are carried on through it).
+  /// optimisations gain no information along the unobservable directions U
+  /// (a global rigid motion). The optimisation is unchanged: its marginal
+  /// re-sets the covariance as before, and U goes on as propagated from the
+  /// first estimates, not recomputed at the optimised values (measured, with
+  /// the reason it is off: README, "The smoother's consistency on walls").
   bool observability_constrained = false;
   /// Estimate the motion and observation factors' noise scales from the
   /// residuals at each optimisation (variance components,
