@@ -43,17 +43,44 @@ bool all_finite(const Eigen::MatrixXd& m) { return m.allFinite(); }
 /// axis through the origin (a rotation by δ moves (x, y) by δ·(−y, x) and the
 /// heading θ by δ). Other coordinates (z, φ, ψ) do not move; a column that
 /// touches no estimated coordinate is left out. For Estimator::set_unobservable.
-Eigen::MatrixXd planar_global_motion(const Pose6& pose, const std::vector<int>& dofs) {
+/// The three columns of planar_global_motion before any is left out.
+Eigen::MatrixXd planar_motion_rows(const Pose6& pose, const std::vector<int>& dofs) {
   Eigen::Matrix<double, 6, 3> all = Eigen::Matrix<double, 6, 3>::Zero();
   all.row(kX) << 1.0, 0.0, -pose[kY];
   all.row(kY) << 0.0, 1.0, pose[kX];
   all.row(kTheta) << 0.0, 0.0, 1.0;
   Eigen::MatrixXd rows(static_cast<Eigen::Index>(dofs.size()), 3);
   for (std::size_t i = 0; i < dofs.size(); ++i) rows.row(static_cast<Eigen::Index>(i)) = all.row(dofs[i]);
+  return rows;
+}
+
+/// The columns of `rows` that are not zero.
+std::vector<Eigen::Index> nonzero_columns(const Eigen::MatrixXd& rows) {
   std::vector<Eigen::Index> kept;
-  for (Eigen::Index c = 0; c < 3; ++c)
+  for (Eigen::Index c = 0; c < rows.cols(); ++c)
     if (!rows.col(c).isZero(0.0)) kept.push_back(c);
-  return rows(Eigen::all, kept);
+  return kept;
+}
+
+Eigen::MatrixXd planar_global_motion(const Pose6& pose, const std::vector<int>& dofs) {
+  const Eigen::MatrixXd rows = planar_motion_rows(pose, dofs);
+  return rows(Eigen::all, nonzero_columns(rows));
+}
+
+/// How the same three global motions move a feature's coordinates x_f
+/// (n × 3): the (x, y) of every point block by (1, 0), (0, 1) and (−y, x);
+/// heights and scalar blocks not at all.
+Eigen::MatrixXd feature_planar_motion(const CoordLayout& layout, const Eigen::VectorXd& x) {
+  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(x.size(), 3);
+  for (int b = 0; b < layout.num_blocks(); ++b) {
+    if (layout.kind(b) == BlockKind::Scalar) continue;
+    const int o = layout.offset(b);
+    D(o, 0) = 1.0;
+    D(o + 1, 1) = 1.0;
+    D(o, 2) = -x[o + 1];
+    D(o + 1, 2) = x[o];
+  }
+  return D;
 }
 
 /// Throws a PluginError naming the instance when a plugin hands back NaN/inf.
@@ -319,9 +346,34 @@ bool Slam::relinearize(bool end_of_data) {
     problem_->smoothed(trajectory_, evaluated_,
                        ground_truth_sensor_ >= 0 ? &sensors_[ground_truth_sensor_].config.mount : nullptr);
     associator_.map_changed();
+    refresh_unobservable();
   }
   stats_.seconds_update += seconds_since(t0);
   return false;
+}
+
+void Slam::refresh_unobservable() {
+  const Eigen::MatrixXd robot = planar_motion_rows(x_r_, dofs_);
+  const std::vector<Eigen::Index> kept = nonzero_columns(robot);
+  Eigen::MatrixXd U = Eigen::MatrixXd::Zero(estimator_->dim(), 3);
+  U.topRows(robot.rows()) = robot;
+  // A feature's M-space rows move by δx_p = B(x_f) δx_f (eq. 10); a shared
+  // coordinate's rows get the same values from each member (eq. 33's identity).
+  for (const MapFeature& f : features_) {
+    if (f.state_idx.empty()) continue;
+    const FeatureTypeSlot& type = types_[static_cast<std::size_t>(f.type)];
+    const Eigen::MatrixXd B = guarded(type.instance, *type.library, "B", [&] { return f.feature->B(); });
+    const Eigen::MatrixXd rows = B * feature_planar_motion(f.feature->layout(), f.feature->coords());
+    if (rows.rows() != static_cast<Eigen::Index>(f.state_idx.size()))
+      throw PluginError(type.instance + " (plugin '" + type.plugin + "'): B of feature #" + std::to_string(f.id) +
+                        " has " + std::to_string(rows.rows()) + " rows for its " + std::to_string(f.state_idx.size()) +
+                        " estimator rows");
+    for (std::size_t i = 0; i < f.state_idx.size(); ++i)
+      U.row(f.state_idx[i]) = rows.row(static_cast<Eigen::Index>(i));
+  }
+  const Eigen::MatrixXd U_kept = U(Eigen::all, kept);
+  guarded(config_.estimator.instance, *estimator_lib_, "set_unobservable",
+          [&] { estimator_->set_unobservable(U_kept); });
 }
 
 // ---- Phase 1: predict ------------------------------------------------------

@@ -430,6 +430,9 @@ class Slam {
                             std::unique_ptr<ScanField>& field, std::vector<Eigen::Vector2d>& local) const;
   /// A re-linearising estimator's turn (problem.cpp); false, for step(), at the end of the data.
   bool relinearize(bool end_of_data);
+  /// After a re-linearisation moved the estimate: the unobservable directions
+  /// of every estimator row at the new values (Estimator::set_unobservable).
+  void refresh_unobservable();
   SensorView sensor_view(int sensor_index, double t) const;
   /// The features of a map file rebuilt through their plugins, with the
   /// kernel's bookkeeping (all or nothing; checkpoint.cpp and map_session.cpp).

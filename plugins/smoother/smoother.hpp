@@ -80,9 +80,10 @@ struct SmootherOptions {
   /// Roumeliotis, IJRR 2010; mspace/ekf_filter.hpp): its updates between
   /// optimisations gain no information along the unobservable directions U
   /// (a global rigid motion). The optimisation is unchanged: its marginal
-  /// re-sets the covariance as before, and U goes on as propagated from the
-  /// first estimates, not recomputed at the optimised values (measured, with
-  /// the reason it is off: README, "The smoother's consistency on walls").
+  /// re-sets the covariance as before, and the kernel then gives U at the
+  /// optimised values (Estimator::set_unobservable with every row). With
+  /// problem.freeze_in_sensor_frame the covariance is then consistent
+  /// (README, "The smoother's consistency on walls").
   bool observability_constrained = false;
   /// Estimate the motion and observation factors' noise scales from the
   /// residuals at each optimisation (variance components,

@@ -93,7 +93,7 @@ void CekfFilter::reset(const Eigen::MatrixXd& P_rr) {
 }
 
 void CekfFilter::set_unobservable(const Eigen::MatrixXd& U_r) {
-  if (constrained_) U_.set_robot_rows(U_r, "cekf set_unobservable");
+  if (constrained_) U_.set(U_r, "cekf set_unobservable");
 }
 
 void CekfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {

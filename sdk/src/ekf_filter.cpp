@@ -35,7 +35,7 @@ void EkfFilter::reset(const Eigen::MatrixXd& P_rr) {
 }
 
 void EkfFilter::set_unobservable(const Eigen::MatrixXd& U_r) {
-  if (constrained_) U_.set_robot_rows(U_r, "ekf set_unobservable");
+  if (constrained_) U_.set(U_r, "ekf set_unobservable");
 }
 
 void EkfFilter::predict(const Eigen::MatrixXd& J_rr, const Eigen::MatrixXd& Q) {

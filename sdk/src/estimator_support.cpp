@@ -104,6 +104,15 @@ void UnobservableDirections::set_robot_rows(const Eigen::MatrixXd& U_r, const st
   U_.topRows(k_) = U_r;
 }
 
+void UnobservableDirections::set(const Eigen::MatrixXd& U, const std::string& context) {
+  if (U.rows() != k_ && U.rows() == U_.rows()) {
+    require_finite(U, context, "U");
+    U_ = U;
+    return;
+  }
+  set_robot_rows(U, context);
+}
+
 void UnobservableDirections::predict(const Eigen::MatrixXd& J_rr) {
   U_.topRows(k_) = (J_rr * U_.topRows(k_)).eval();
 }

@@ -579,6 +579,29 @@ TEST(EkfObservabilityConstrained, DirectionsFollowPredictAugmentAndRemove) {
   EXPECT_EQ(f.dim(), 5);
 }
 
+// After a re-linearisation the kernel gives every row (Estimator::
+// set_unobservable, SDK 6.1): U is replaced as a whole; k rows still set the
+// robot's rows only; any other row count is refused.
+TEST(EkfObservabilityConstrained, EveryRowMayBeGivenAfterARelinearisation) {
+  EkfFilter f(4, true);
+  f.reset(MatrixXd::Identity(3, 3));
+  f.set_unobservable(global_motion(1.0, 2.0));
+  f.augment(StateAugmentation{{0, 1, 2}, MatrixXd{{1, 0, -1}, {0, 1, 2}}, 0.1 * MatrixXd::Identity(2, 2)});
+  MatrixXd every(5, 3);
+  every << global_motion(4.0, -1.0), MatrixXd{{1, 0, 0.5}, {0, 1, 7.0}};
+  f.set_unobservable(every);
+  EXPECT_EQ(max_abs_diff(f.unobservable(), every), 0.0);
+  f.set_unobservable(global_motion(0.0, 0.0));  // the robot's rows only
+  EXPECT_EQ(max_abs_diff(f.unobservable().bottomRows(2), every.bottomRows(2)), 0.0);
+  EXPECT_EQ(max_abs_diff(f.unobservable().topRows(3), global_motion(0.0, 0.0)), 0.0);
+  expect_throw_message<std::invalid_argument>([&] { f.set_unobservable(MatrixXd::Ones(4, 3)); },
+                                              "ekf set_unobservable: U_r is 4 x 3, expected 3 x 3");
+  MatrixXd bad = every;
+  bad(4, 1) = std::nan("");
+  expect_throw_message<std::invalid_argument>([&] { f.set_unobservable(bad); },
+                                              "ekf set_unobservable: U row 4 is not finite");
+}
+
 /// An observation of two rows over `idx` with the given Jacobian.
 LinearizedObservation observation(const std::vector<int>& idx, const MatrixXd& J) {
   return LinearizedObservation{VectorXd{{0.3, -0.2}}, MatrixXd{{0.05, 0.01}, {0.01, 0.04}}, idx, J};

@@ -27,9 +27,11 @@
 // running filter). Minor versions add without changing any layout (5.1:
 // DrawingItem::Kind::Direction, direction_item and
 // FeatureDrawing::direction_only — a kernel of 5.0 would draw nothing for a
-// Direction item; 6: Feature::absorb, the merge of a feature mapped twice).
+// Direction item; 6: Feature::absorb, the merge of a feature mapped twice;
+// 6.1: Estimator::set_unobservable may also be given every state row, after a
+// re-linearisation).
 #define MSPACE_SDK_VERSION_MAJOR 6
-#define MSPACE_SDK_VERSION_MINOR 0
+#define MSPACE_SDK_VERSION_MINOR 1
 
 #define MSPACE_ABI_STR2(x) #x
 #define MSPACE_ABI_STR(x) MSPACE_ABI_STR2(x)

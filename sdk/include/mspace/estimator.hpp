@@ -59,7 +59,12 @@ class Estimator : public PluginObject {
   /// observability-constrained EKF of Huang, Mourikis & Roumeliotis,
   /// "Observability-based rules for designing consistent EKF SLAM
   /// estimators", IJRR 2010) carry them through predict, augment and remove;
-  /// the others ignore them.
+  /// the others ignore them. For an estimator that re-linearises
+  /// (wants_problem()), the kernel calls it again after every relinearize()
+  /// that moved the estimate, with every row (dim() × u): the directions at
+  /// the new values (each feature's rows: B(x_f) times the motion of its
+  /// point blocks), which replace those carried from the first estimates
+  /// (SDK 6.1).
   virtual void set_unobservable(const Eigen::MatrixXd& /*U_r*/) {}
 
   // ---- Re-linearisation (mspace/problem.hpp) --------------------------------

@@ -61,6 +61,10 @@ class UnobservableDirections {
   /// as the checks above do). The other rows keep their values when u is
   /// unchanged and start at zero otherwise.
   void set_robot_rows(const Eigen::MatrixXd& U_r, const std::string& context);
+  /// Estimator::set_unobservable's two forms: U with the robot's k rows
+  /// (set_robot_rows) or with every row (rows() × u, replacing all of U, e.g.
+  /// the directions at re-linearised values).
+  void set(const Eigen::MatrixXd& U, const std::string& context);
   /// U_r ← J_rr U_r (J_rr of eq. 26, already checked by the caller).
   void predict(const Eigen::MatrixXd& J_rr);
   /// Appends the rows aug.J U[aug.idx] of the new state rows (aug checked by the caller).
