@@ -37,12 +37,6 @@ constexpr int kNisWindow = 200;
 
 bool all_finite(const Eigen::MatrixXd& m) { return m.allFinite(); }
 
-/// The directions of the robot's estimated pose coordinates `dofs` along which
-/// a global planar motion of robot and map moves them, at `pose`: one column
-/// each for translation along the map's x and y axes and rotation about its z
-/// axis through the origin (a rotation by δ moves (x, y) by δ·(−y, x) and the
-/// heading θ by δ). Other coordinates (z, φ, ψ) do not move; a column that
-/// touches no estimated coordinate is left out. For Estimator::set_unobservable.
 /// The three columns of planar_global_motion before any is left out.
 Eigen::MatrixXd planar_motion_rows(const Pose6& pose, const std::vector<int>& dofs) {
   Eigen::Matrix<double, 6, 3> all = Eigen::Matrix<double, 6, 3>::Zero();
@@ -62,6 +56,12 @@ std::vector<Eigen::Index> nonzero_columns(const Eigen::MatrixXd& rows) {
   return kept;
 }
 
+/// The directions of the robot's estimated pose coordinates `dofs` along which
+/// a global planar motion of robot and map moves them, at `pose`: one column
+/// each for translation along the map's x and y axes and rotation about its z
+/// axis through the origin (a rotation by δ moves (x, y) by δ·(−y, x) and the
+/// heading θ by δ). Other coordinates (z, φ, ψ) do not move; a column that
+/// touches no estimated coordinate is left out. For Estimator::set_unobservable.
 Eigen::MatrixXd planar_global_motion(const Pose6& pose, const std::vector<int>& dofs) {
   const Eigen::MatrixXd rows = planar_motion_rows(pose, dofs);
   return rows(Eigen::all, nonzero_columns(rows));
